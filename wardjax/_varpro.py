@@ -1,0 +1,371 @@
+"""Fast path: fixed-iteration Levenberg–Marquardt on the variable-projection reduction.
+
+One scanline holds ``N`` samples of RGB BRDF values ``f[n, c]`` with weights
+``w[n, c]`` (``c`` runs over 1 weight column shared by the channels, or 3).
+The Ward model is
+
+    f[n, c] ≈ a[c] + s · b[n](θ),    a = ρd / π,  s = ρs,
+    b[n](θ) = N[n] · exp(−u[n]/αx² − v[n]/αy²) / (αx αy),
+
+with the geometry ``(u, v, N)`` fixed (:func:`wardjax.ward.ward_geometry`).
+For fixed roughness ``θ = log α`` (or ``(log αx, log αy)``) the model is
+linear in ``(a, s)``: variable projection (Golub & Pereyra 1973) solves those
+in closed form and leaves a 1- or 2-parameter nonlinear problem.
+
+With ``x̃ = x − Σw x / Σw`` (weighted centring per channel) and ``m = 3 / C``
+the multiplicity of a shared weight column:
+
+* ``s(θ) = max(⟨b̃, f̃⟩, 0) / ⟨b̃, b̃⟩``, ``a[c] = f̄[c] − s b̄[c]``
+* ``χ²(θ) = K₀ − s (2⟨b̃, f̃⟩ − s ⟨b̃, b̃⟩)``, ``K₀ = Σ w f̃²``
+* Kaufman's Jacobian of the projected residual, ``J = −s P⊥ ∂b/∂θ``, gives
+  ``JᵀJ = s² (⟨b̃', b̃'⟩ − ⟨b̃', b̃⟩⟨b̃, b̃'⟩ / ⟨b̃, b̃⟩)`` and the exact gradient
+  ``Jᵀr = −s (⟨b', f̃⟩ − s ⟨b', b̃⟩)``,
+
+where ``⟨x, y⟩`` sums ``w x y`` over samples and channels. Every quantity is
+a weighted sum over the samples of one exponential, so an RGB fit costs what a
+grey one does.
+
+The search: a data-driven guess of ``α`` (half-maximum width of the peak
+above the floor), an 8-point grid in ``log α`` around it, the vertex of the
+parabola through the best three grid points, then a fixed number of LM steps
+(no data-dependent loop under ``vmap``: every member does the same work).
+Anisotropic fits continue from the isotropic optimum with 2-D LM steps.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+import jax
+import jax.numpy as jnp
+from jaxtyping import Array, Bool, Float, Int
+
+from ._status import Status
+from .ward import ward_geometry
+
+# Search range of α. Below 1e-4 no camera resolves a lobe; above 2 the lobe is
+# flat over the hemisphere and α no longer has a meaning.
+ALPHA_MIN = 1e-4
+ALPHA_MAX = 2.0
+GRID_POINTS = 8
+GRID_STEP = 0.5  # in log α: the grid spans a factor e^3.5 ≈ 33
+ISO_STEPS = 6
+ANISO_STEPS = 10
+# Converged when the remaining Gauss–Newton step is below this fraction of the
+# parameter's standard error (or below an absolute floor in log α).
+STEP_TOL_SIGMA = 1e-3
+STEP_TOL_ABS = 1e-9
+
+
+class Stats(NamedTuple):
+    """Weighted sums of one scanline at one roughness."""
+
+    chi2: Array  # ()
+    s: Array  # () profiled ρs (≥ 0)
+    sbf: Array  # () ⟨b̃, f̃⟩
+    sbb: Array  # () ⟨b̃, b̃⟩
+    jtj: Array  # (k, k) ⟨b̃', b̃'⟩-based Kaufman normal matrix (× s²)
+    jtr: Array  # (k,)
+    spb: Array  # (k,) ⟨b̃', b̃⟩
+    spp: Array  # (k, k) ⟨b̃', b̃'⟩
+    bbar: Array  # (C,) weighted mean of b per weight column
+    bpbar: Array  # (C, k) weighted mean of ∂b/∂θ
+
+
+class Prepared(NamedTuple):
+    """Per-scanline constants, computed once before the search.
+
+    Layout puts the sample axis last (minor), so that XLA vectorises along it.
+    """
+
+    u: Array  # (N,)
+    v: Array  # (N,)
+    g: Array  # (N,) normalisation, 0 where invalid
+    w: Array  # (C, N) weights, 0 where invalid
+    ft: Array  # (C, N) weighted-centred data (channel-summed when C == 1)
+    wsum: Array  # (C,) Σ w (1 where there is none, to keep divisions finite)
+    fbar: Array  # (3,) per-channel weighted mean of f
+    k0: Array  # () Σ w f̃² over channels
+    mult: float  # m = 3 / C
+
+
+def prepare(f, u, v, g, w) -> Prepared:
+    """Centre the data and collect the constants of one scanline.
+
+    ``f`` (N, 3), ``u, v, g`` (N,), ``w`` (N, C) with invalid samples already
+    at weight 0 and ``f`` finite there.
+    """
+    c = w.shape[-1]
+    f = f.T  # (3, N)
+    w = w.T  # (C, N)
+    wsum = jnp.sum(w, axis=-1)
+    wsum = jnp.where(wsum > 0, wsum, 1.0)
+    fbar = jnp.sum(w * f, axis=-1) / (wsum if c == 3 else wsum[0])  # (3,)
+    fc = f - fbar[:, None]
+    k0 = jnp.sum(w * fc * fc)
+    ft = jnp.sum(fc, axis=0, keepdims=True) if c == 1 else fc
+    return Prepared(u, v, g, w, ft, wsum, fbar, k0, 3.0 / c)
+
+
+def basis(theta, u, v, g, iso: bool):
+    """``b`` (N,) and ``(∂b/∂θ) / b`` (k, N) at ``θ`` (log α or (log αx, log αy))."""
+    if iso:
+        inv = jnp.exp(-2.0 * theta[0])
+        t = u + v
+        b = g * jnp.exp(-t * inv) * inv
+        c = (2.0 * t * inv - 2.0)[None, :]
+    else:
+        ix = jnp.exp(-2.0 * theta[0])
+        iy = jnp.exp(-2.0 * theta[1])
+        b = g * jnp.exp(-(u * ix + v * iy) - theta[0] - theta[1])
+        c = jnp.stack([2.0 * u * ix - 1.0, 2.0 * v * iy - 1.0], axis=0)
+    return b, c
+
+
+def stats(theta, p: Prepared, iso: bool, with_jac: bool = True) -> Stats:
+    """Profiled χ², ``s`` and the Kaufman normal equations at ``θ``.
+
+    One pass of raw weighted sums (``Σwb``, ``Σwb²``, ``Σw f̃ b`` and their
+    ``∂/∂θ`` companions), centred algebraically afterwards: ``⟨b̃, b̃⟩ =
+    m Σ_c (Σwb² − (Σwb)²/Σw)``. ``f̃`` is centred before the sums.
+    """
+    b, c = basis(theta, p.u, p.v, p.g, iso)
+    k = c.shape[0]
+    w, wsum, m = p.w, p.wsum, p.mult
+    wb = w * b  # (C, N)
+    bsum = jnp.sum(wb, axis=-1)  # (C,)
+    qsum = jnp.sum(wb * b, axis=-1)
+    psum = jnp.sum(wb * p.ft, axis=-1)
+    sbb = m * jnp.sum(qsum - bsum * bsum / wsum)
+    sbf = jnp.sum(psum)
+    ok = sbb > 0
+    s = jnp.where(ok, jnp.maximum(sbf, 0.0) / jnp.where(ok, sbb, 1.0), 0.0)
+    chi2 = p.k0 - s * (2.0 * sbf - s * sbb)
+    bbar = bsum / wsum
+    if not with_jac:
+        z = jnp.zeros((k,), chi2.dtype)
+        zz = jnp.zeros((k, k), chi2.dtype)
+        return Stats(chi2, s, sbf, sbb, zz, z, z, zz, bbar, jnp.zeros((w.shape[0], k), chi2.dtype))
+    bp = b * c  # (k, N)
+    wbp = w[:, None, :] * bp[None]  # (C, k, N)
+    bpsum = jnp.sum(wbp, axis=-1)  # (C, k)
+    qpsum = jnp.sum(wbp * b, axis=-1)
+    ppsum = jnp.sum(wbp * p.ft[:, None, :], axis=-1)
+    rpsum = jnp.sum(wbp[:, :, None, :] * bp[None, None, :, :], axis=-1)  # (C, k, k)
+    spb = m * jnp.sum(qpsum - bsum[:, None] * bpsum / wsum[:, None], axis=0)
+    spf = jnp.sum(ppsum, axis=0)
+    spp = m * jnp.sum(rpsum - bpsum[:, :, None] * bpsum[:, None, :] / wsum[:, None, None], axis=0)
+    jtj = s * s * (spp - jnp.outer(spb, spb) / jnp.where(ok, sbb, 1.0))
+    jtr = -s * (spf - s * spb)
+    return Stats(chi2, s, sbf, sbb, jtj, jtr, spb, spp, bbar, bpsum / wsum[:, None])
+
+
+def _solve_small(a, b):
+    """Solve a 1×1 or 2×2 system in closed form (vmap-friendly, no LAPACK call)."""
+    if a.shape[-1] == 1:
+        den = a[0, 0]
+        return jnp.where(den > 0, b / jnp.where(den > 0, den, 1.0), 0.0)
+    det = a[0, 0] * a[1, 1] - a[0, 1] * a[1, 0]
+    ok = jnp.abs(det) > 0
+    det = jnp.where(ok, det, 1.0)
+    x0 = (a[1, 1] * b[0] - a[0, 1] * b[1]) / det
+    x1 = (a[0, 0] * b[1] - a[1, 0] * b[0]) / det
+    return jnp.where(ok, jnp.stack([x0, x1]), 0.0)
+
+
+def initial_alpha(p: Prepared) -> Array:
+    """Data-driven guess of ``α``: the half-maximum width of the peak above the floor.
+
+    For a lobe ``exp(−t/α²)`` the excess over the floor halves where
+    ``t − t_peak = α² ln 2``; ``t = tan²δ``. The floor is the smallest
+    weighted-channel-mean value. Returns a value inside the search range.
+    """
+    valid = jnp.sum(p.w, axis=0) > 0
+    y = jnp.sum(p.ft, axis=0)
+    big = jnp.finfo(y.dtype).max
+    floor = jnp.min(jnp.where(valid, y, big))
+    excess = jnp.where(valid, y - floor, 0.0)
+    peak = jnp.argmax(excess)
+    t = p.u + p.v
+    half = excess >= 0.5 * excess[peak]
+    spread = jnp.max(jnp.where(half & valid, t, -big)) - t[peak]
+    alpha = jnp.sqrt(jnp.maximum(spread, 0.0) / jnp.log(2.0))
+    alpha = jnp.where(jnp.isfinite(alpha) & (alpha > 0), alpha, 0.1)
+    return jnp.clip(alpha, 2 * ALPHA_MIN, ALPHA_MAX / 2).astype(y.dtype)
+
+
+def grid_start(p: Prepared) -> Array:
+    """Best of an 8-point ``log α`` grid around the guess, refined by a parabola.
+
+    The vertex of the parabola through the best point and its two neighbours
+    is taken unconditionally when the curvature is positive (it is the
+    minimum of the local quadratic model), clipped to one grid step.
+    """
+    centre = jnp.log(initial_alpha(p))
+    offsets = (jnp.arange(GRID_POINTS, dtype=centre.dtype) - (GRID_POINTS - 1) / 2) * GRID_STEP
+    lo, hi = math.log(ALPHA_MIN), math.log(ALPHA_MAX)
+    thetas = jnp.clip(centre + offsets, lo, hi)
+    chi = jax.vmap(lambda th: stats(th[None], p, True, with_jac=False).chi2)(thetas)
+    chi = jnp.where(jnp.isfinite(chi), chi, jnp.finfo(chi.dtype).max)
+    i = jnp.clip(jnp.argmin(chi), 1, GRID_POINTS - 2)
+    cm, c0, cp = chi[i - 1], chi[i], chi[i + 1]
+    curv = cm - 2.0 * c0 + cp
+    shift = jnp.where(curv > 0, 0.5 * GRID_STEP * (cm - cp) / jnp.where(curv > 0, curv, 1.0), 0.0)
+    shift = jnp.clip(shift, -GRID_STEP, GRID_STEP)
+    best = jnp.where(chi[jnp.argmin(chi)] < c0, thetas[jnp.argmin(chi)], thetas[i] + shift)
+    return jnp.clip(best, lo, hi)[None]
+
+
+def lm(theta0, p: Prepared, iso: bool, steps: int, rtol: float):
+    """``steps`` Levenberg–Marquardt iterations on the reduced problem.
+
+    Marquardt's scaling (``λ diag(JᵀJ)``), ``λ`` divided by 3 on success and
+    multiplied by 10 on failure. A step is accepted when it lowers χ² by more
+    than the rounding allowance ``rtol · K₀`` (0 in float64 is too strict for
+    float32 sums, which round at that level).
+    """
+    lo, hi = math.log(ALPHA_MIN), math.log(ALPHA_MAX)
+    tiny = jnp.finfo(theta0.dtype).tiny
+
+    def body(_, carry):
+        theta, st, lam = carry
+        h = st.jtj + lam * jnp.diag(jnp.diag(st.jtj)) + tiny * jnp.eye(theta.shape[0], dtype=theta.dtype)
+        step = -_solve_small(h, st.jtr)
+        trial = jnp.clip(theta + step, lo, hi)
+        st_new = stats(trial, p, iso)
+        ok = jnp.isfinite(st_new.chi2) & (st_new.chi2 < st.chi2 + rtol * p.k0)
+        ok = ok & jnp.any(trial != theta)
+        theta = jnp.where(ok, trial, theta)
+        st = jax.tree_util.tree_map(lambda a, b: jnp.where(ok, a, b), st_new, st)
+        lam = jnp.where(ok, jnp.maximum(lam / 3.0, 1e-12), jnp.minimum(lam * 10.0, 1e12))
+        return theta, st, lam
+
+    carry = (theta0, stats(theta0, p, iso), jnp.asarray(1e-3, theta0.dtype))
+    theta, st, _ = jax.lax.fori_loop(0, steps, body, carry)
+    return theta, st
+
+
+class ScanlineSolution(NamedTuple):
+    """What the kernel returns for one scanline (all arrays)."""
+
+    rho_d: Float[Array, "3"]
+    rho_s: Float[Array, ""]
+    alpha: Float[Array, "k"]
+    cov: Float[Array, "p p"]  # natural parameters (ρd RGB, ρs, α or αx, αy), scaled
+    chi2: Float[Array, ""]
+    dof: Int[Array, ""]
+    status: Int[Array, ""]
+
+
+def _inv_small(a):
+    """Inverse of a symmetric 1×1, 2×2 or 3×3 matrix by the adjugate (NaN where singular)."""
+    n = a.shape[-1]
+    if n == 1:
+        return 1.0 / a
+    if n == 2:
+        det = a[0, 0] * a[1, 1] - a[0, 1] * a[1, 0]
+        return jnp.array([[a[1, 1], -a[0, 1]], [-a[1, 0], a[0, 0]]]) / det
+    c00 = a[1, 1] * a[2, 2] - a[1, 2] * a[2, 1]
+    c01 = a[1, 2] * a[2, 0] - a[1, 0] * a[2, 2]
+    c02 = a[1, 0] * a[2, 1] - a[1, 1] * a[2, 0]
+    c11 = a[0, 0] * a[2, 2] - a[0, 2] * a[2, 0]
+    c12 = a[0, 1] * a[2, 0] - a[0, 0] * a[2, 1]
+    c22 = a[0, 0] * a[1, 1] - a[0, 1] * a[1, 0]
+    det = a[0, 0] * c00 + a[0, 1] * c01 + a[0, 2] * c02
+    adj = jnp.array([[c00, c01, c02], [c01, c11, c12], [c02, c12, c22]])
+    return adj / det
+
+
+def covariance(theta, st: Stats, p: Prepared, scale):
+    """Covariance of ``(ρd R, G, B, ρs, α…)`` by blocks, from the sums of :func:`stats`.
+
+    The information matrix ``JᵀWJ`` in natural parameters has a diagonal ρd
+    block ``A = diag(Σw)/π²``. Eliminating it (Schur complement) leaves, for
+    ``(ρs, α…)``, ``S = D [[⟨b̃,b̃⟩, ⟨b̃,b̃'⟩], [⟨b̃',b̃⟩, ⟨b̃',b̃'⟩]] D`` with
+    ``D = diag(1, s/α…)`` (since ``∂f/∂α = s b c / α``): the sums the search
+    already forms. Then ``Σ_θθ = S⁻¹``, ``Σ_dθ = −M S⁻¹`` and
+    ``Σ_dd = A⁻¹ + M S⁻¹ Mᵀ`` with ``M = A⁻¹B = π (b̄, s b̄'/α)`` per channel.
+    Everything is multiplied by the residual variance ``scale = χ²/dof``.
+    """
+    k = theta.shape[0]
+    alpha = jnp.exp(theta)
+    s = st.s
+    sv = jnp.concatenate([jnp.ones((1,), theta.dtype), s / alpha])
+    top = jnp.concatenate([st.sbb[None], st.spb])[None, :]
+    bottom = jnp.concatenate([st.spb[:, None], st.spp], axis=1)
+    info = jnp.concatenate([top, bottom], axis=0) * jnp.outer(sv, sv)
+    sinv = _inv_small(info)  # (k+1, k+1)
+    mrow = jnp.pi * jnp.concatenate([st.bbar[:, None], st.bpbar * (s / alpha)], axis=1)  # (C, k+1)
+    mrow = jnp.broadcast_to(mrow, (3, k + 1))
+    wsum = jnp.broadcast_to(p.wsum, (3,))
+    c_dt = -mrow @ sinv
+    c_dd = jnp.diag(jnp.pi**2 / wsum) + mrow @ sinv @ mrow.T
+    cov = jnp.block([[c_dd, c_dt], [c_dt.T, sinv]])
+    return cov * scale
+
+
+def solve_scanline(f, wi, wo, w, *, iso: bool, rtol: float, normalization: str) -> ScanlineSolution:
+    """Fit one scanline (the function that is vmapped over a chunk)."""
+    geom = ward_geometry(wi, wo, normalization)
+    w = jnp.where(geom.valid[:, None], w, 0.0)
+    p = prepare(f, geom.u, geom.v, geom.g, w)
+    theta = grid_start(p)
+    theta, st = lm(theta, p, True, ISO_STEPS, rtol)
+    if not iso:
+        theta = jnp.concatenate([theta, theta])
+        theta, st = lm(theta, p, False, ANISO_STEPS, rtol)
+    k = theta.shape[0]
+    n_par = 4 + k
+    n_obs = jnp.sum(jnp.broadcast_to(p.w, (3,) + p.w.shape[1:]) > 0)
+    n_samples = jnp.sum(jnp.sum(p.w, axis=0) > 0)
+    dof = n_obs - n_par
+    s = st.s
+    rho_d = jnp.pi * (p.fbar - s * jnp.broadcast_to(st.bbar, (3,)))
+    scale = st.chi2 / jnp.maximum(dof, 1)
+    cov = covariance(theta, st, p, scale)
+
+    # Convergence: the remaining Gauss–Newton step versus the standard error.
+    gn = _solve_small(st.jtj, -st.jtr)
+    sigma_theta = jnp.sqrt(jnp.abs(jnp.diag(_inv_small(st.jtj))) * scale)
+    small = jnp.all(jnp.abs(gn) <= STEP_TOL_SIGMA * sigma_theta + STEP_TOL_ABS)
+    lo, hi = math.log(ALPHA_MIN), math.log(ALPHA_MAX)
+    # ∂χ²/∂θ = 2 Jᵀr: outward at the lower bound means Jᵀr > 0 (χ² falls as θ falls).
+    at_lo = (theta <= lo + 1e-6) & (st.jtr > 0)
+    at_hi = (theta >= hi - 1e-6) & (st.jtr < 0)
+    at_bound = jnp.any(at_lo | at_hi)
+    finite = (
+        jnp.all(jnp.isfinite(theta))
+        & jnp.isfinite(st.chi2)
+        & jnp.all(jnp.isfinite(rho_d))
+        & jnp.all(jnp.isfinite(jnp.diag(cov)))
+    )
+    insufficient = (n_samples < k + 3) | (dof < 1) | ~(s > 0) | ~(st.sbb > 0)
+    status = jnp.where(
+        insufficient,
+        Status.INSUFFICIENT_DATA,
+        jnp.where(
+            ~finite,
+            Status.NONFINITE,
+            jnp.where(at_bound, Status.AT_BOUND, jnp.where(small, Status.CONVERGED, Status.MAX_STEPS)),
+        ),
+    )
+    return ScanlineSolution(rho_d, s, jnp.exp(theta), cov, st.chi2, dof, status.astype(jnp.int32))
+
+
+def fit_chunk(
+    f: Float[Array, "S N 3"],
+    wi: Float[Array, "S N 3"],
+    wo: Float[Array, "S N 3"],
+    w: Float[Array, "S N C"],
+    *,
+    iso: bool,
+    rtol: float,
+    normalization: str,
+) -> ScanlineSolution:
+    """vmap of :func:`solve_scanline` over the scanlines of one chunk."""
+    fn = lambda *a: solve_scanline(*a, iso=iso, rtol=rtol, normalization=normalization)  # noqa: E731
+    return jax.vmap(fn)(f, wi, wo, w)
+
+
+fit_chunk_jit = jax.jit(fit_chunk, static_argnames=("iso", "rtol", "normalization"))
