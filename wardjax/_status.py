@@ -26,9 +26,11 @@ class Status(enum.IntEnum):
     ``NONFINITE``
         NaN or inf appeared in the parameters, the χ² or the covariance.
     ``INSUFFICIENT_DATA``
-        Fewer valid observations than parameters + 1, or no specular signal
-        in the data (the best non-negative ``ρs`` is 0), so ``α`` is not
-        identified.
+        ``α`` is not identified by the data: too few valid samples, no
+        specular lobe detected (it lowers χ² by less than 25 residual
+        variances, a 5σ likelihood-ratio test against a lobe-free model), or
+        a lobe whose width is unresolved (σ_α/α > 1) — a scanline that misses
+        the highlight, say. The parameters are reported but not certified.
     ``AT_BOUND``
         The roughness ended on its search bound with the gradient pointing
         outward: the data favour a lobe narrower or wider than the model

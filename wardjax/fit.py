@@ -148,8 +148,10 @@ class ScanlineFit:
         Uses :class:`optimistix.LevenbergMarquardt` on ``(log ρs, log αx,
         log αy)`` with each scanline's ρd solved in closed form inside the
         residual (variable projection), started from the medians of the
-        per-scanline fits. Scanlines whose own fit reported
-        ``insufficient_data`` or ``nonfinite`` are left out.
+        converged per-scanline fits. Every scanline with at least 3 valid
+        samples in each channel takes part (a scanline that misses the
+        highlight still says where the lobe is not); mask a scanline to
+        leave it out.
 
         Parameters
         ----------
@@ -335,7 +337,7 @@ def _iso_model(y, p: _varpro.Prepared):
     """Residual of the full isotropic problem in scaled coordinates y = (ρd RGB, log ρs, log α)."""
     rho_d, log_rs, log_a = y[:3], y[3], y[4]
     b, _ = _varpro.basis(log_a[None], p.u, p.v, p.g, True)
-    f_model = rho_d / jnp.pi + jnp.exp(log_rs) * b[:, None]
+    f_model = rho_d[None, :] / jnp.pi + jnp.exp(log_rs) * b[:, None]
     return f_model
 
 
@@ -361,7 +363,7 @@ def _optimistix_scanline(f, wi, wo, w, normalization):
     # Covariance in natural parameters (ρd, ρs, α) by the chain rule from y.
     jac = jax.jacfwd(lambda yy: residual(yy, None).reshape(-1))(y)
     scale_vec = jnp.concatenate([jnp.ones(3), jnp.exp(y[3:])])
-    jac_nat = jac / scale_vec  # ∂r/∂ρs = ∂r/∂log ρs / ρs, likewise α
+    jac_nat = jac / scale_vec[None, :]  # ∂r/∂ρs = ∂r/∂log ρs / ρs, likewise α
     n_obs = jnp.sum(sw > 0)
     dof = n_obs - 5
     cov = jnp.linalg.inv(jac_nat.T @ jac_nat) * chi2 / jnp.maximum(dof, 1)
@@ -412,7 +414,11 @@ def _joint_residual(y, a: _JointArgs, iso: bool):
 def _combined(res: ScanlineFit, model: str, *, max_steps: int, rtol: float) -> CombinedFit:
     iso = model == "isotropic"
     f, wi, wo, w = res._data
-    use = (res.status != Status.INSUFFICIENT_DATA) & (res.status != Status.NONFINITE)
+    # Every scanline with usable data takes part, including those whose own fit
+    # saw no lobe: a scanline beside the highlight says where the lobe is *not*,
+    # which is exactly what constrains αx.
+    wfull = np.broadcast_to(w, f.shape)
+    use = np.all(np.sum(wfull > 0, axis=1) >= 3, axis=-1) & (res.status != Status.NONFINITE)
     n_use = int(np.sum(use))
     k = 1 if iso else 2
     if n_use == 0:

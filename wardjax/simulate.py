@@ -24,6 +24,7 @@ __all__ = [
     "scanline_directions",
     "scanline_positions",
     "simulate_scanlines",
+    "x_offset_for_slope",
 ]
 
 
@@ -131,6 +132,30 @@ def scanline_positions(
     t = np.linspace(0.0, 1.0, n_samples)
     y = ends[0][:, None] + (ends[1] - ends[0])[:, None] * t
     return np.stack([np.broadcast_to(x0[:, None], y.shape), y, np.zeros_like(y)], -1)
+
+
+def x_offset_for_slope(rig: ScanlineRig, slope) -> np.ndarray:
+    """x offset (mm) of the scanline whose half vector tilts by ``h_x/h_z = slope`` at the mirror y.
+
+    A scanline "through the highlight" of a lobe of width αx has
+    ``|slope| ≲ αx``; ``slope`` may be negative. Found by bisection (the
+    tilt grows monotonically with |x|).
+    """
+    slope = np.atleast_1d(np.asarray(slope, float))
+    lamp = np.broadcast_to(np.asarray(rig.lamp, float), slope.shape + (3,))
+    cam = np.broadcast_to(np.asarray(rig.camera, float), slope.shape + (3,))
+    ym = ScanlineRig(lamp, cam).mirror_y()
+    target = np.abs(slope)
+    lo, hi = np.zeros_like(target), 5.0 * np.maximum(lamp[..., 2], cam[..., 2])
+    for _ in range(80):
+        mid = 0.5 * (lo + hi)
+        p = np.stack([mid, ym, np.zeros_like(mid)], -1)
+        wi, wo = scanline_directions(p, ScanlineRig(lamp, cam))
+        h = wi + wo
+        tilt = np.abs(h[..., 0] / h[..., 2])
+        lo = np.where(tilt < target, mid, lo)
+        hi = np.where(tilt < target, hi, mid)
+    return np.sign(slope) * 0.5 * (lo + hi)
 
 
 class ScanlineData(NamedTuple):

@@ -13,7 +13,15 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .ward import NORMALIZATIONS, Normalization, WardParams, _rho_s_rgb, ward_geometry, ward_specular
+from .ward import (
+    NORMALIZATIONS,
+    Normalization,
+    WardParams,
+    _broadcast_leading,
+    _rho_s_rgb,
+    ward_geometry,
+    ward_specular,
+)
 
 __all__ = ["RHO_D_RANGE", "extract_rho_d"]
 
@@ -28,10 +36,13 @@ _REJECT_MARGIN = 0.05
 @functools.partial(jax.jit, static_argnames="normalization")
 def _extract(f_r, wi, wo, params, normalization):
     geom = ward_geometry(wi, wo, normalization)
-    spec = _rho_s_rgb(params) * ward_specular(geom, params.alpha_x, params.alpha_y)[..., None]
-    rho = jnp.pi * (f_r - spec)
+    spec = ward_specular(geom, params.alpha_x, params.alpha_y)[..., None]
+    rho_s, spec, f_r, valid = _broadcast_leading(
+        (_rho_s_rgb(params), 1), (spec, 1), (f_r, 1), (geom.valid[..., None], 1)
+    )
+    rho = jnp.pi * (f_r - rho_s * spec)
     lo, hi = RHO_D_RANGE
-    ok = geom.valid[..., None] & jnp.isfinite(rho) & (rho >= lo - _REJECT_MARGIN) & (rho <= hi + _REJECT_MARGIN)
+    ok = valid & jnp.isfinite(rho) & (rho >= lo - _REJECT_MARGIN) & (rho <= hi + _REJECT_MARGIN)
     return jnp.where(ok, jnp.clip(rho, lo, hi), jnp.nan)
 
 

@@ -170,15 +170,26 @@ def ward_geometry(
     return WardGeometry(u=u, v=v, g=g, valid=valid)
 
 
+def _broadcast_leading(*arrays_and_tails):
+    """Broadcast arrays explicitly over their leading (batch) axes.
+
+    Each item is ``(array, n_tail)`` where the last ``n_tail`` axes are not
+    batch axes. Explicit ``broadcast_to`` keeps the module valid under
+    ``jax_numpy_rank_promotion="raise"``.
+    """
+    arrays = [jnp.asarray(a) for a, _ in arrays_and_tails]
+    batch = jnp.broadcast_shapes(*(a.shape[: a.ndim - t] for a, (_, t) in zip(arrays, arrays_and_tails)))
+    return [jnp.broadcast_to(a, batch + a.shape[a.ndim - t :]) for a, (_, t) in zip(arrays, arrays_and_tails)]
+
+
 def ward_specular(
     geom: WardGeometry,
     alpha_x: Float[ArrayLike, "..."],
     alpha_y: Float[ArrayLike, "..."],
 ) -> Float[Array, "..."]:
     """The specular lobe per unit ``ρs``: ``N · exp(-(u/αx² + v/αy²)) / (αx αy)``."""
-    ax = jnp.asarray(alpha_x)
-    ay = jnp.asarray(alpha_y)
-    return geom.g * jnp.exp(-(geom.u / (ax * ax) + geom.v / (ay * ay))) / (ax * ay)
+    u, v, g, ax, ay = _broadcast_leading((geom.u, 0), (geom.v, 0), (geom.g, 0), (alpha_x, 0), (alpha_y, 0))
+    return g * jnp.exp(-(u / (ax * ax) + v / (ay * ay))) / (ax * ay)
 
 
 def ward_brdf(
@@ -210,9 +221,11 @@ def ward_brdf(
     """
     geom = ward_geometry(wi, wo, normalization)
     spec = ward_specular(geom, params.alpha_x, params.alpha_y)[..., None]
-    rho_s = _rho_s_rgb(params)
-    f = jnp.asarray(params.rho_d) / jnp.pi + rho_s * spec
-    return jnp.where(geom.valid[..., None], f, 0.0)
+    rho_d, rho_s, spec, valid = _broadcast_leading(
+        (params.rho_d, 1), (_rho_s_rgb(params), 1), (spec, 1), (geom.valid[..., None], 1)
+    )
+    f = rho_d / jnp.pi + rho_s * spec
+    return jnp.where(valid, f, 0.0)
 
 
 def ward_brdf_angles(
@@ -244,8 +257,7 @@ def ward_brdf_angles(
     h = wi + wo
     delta = jnp.arccos(h[..., 2] / jnp.linalg.norm(h, axis=-1))
     phi = jnp.arctan2(h[..., 1], h[..., 0])
-    ax = jnp.asarray(params.alpha_x)
-    ay = jnp.asarray(params.alpha_y)
+    delta, phi, ax, ay = _broadcast_leading((delta, 0), (phi, 0), (params.alpha_x, 0), (params.alpha_y, 0))
     k = jnp.exp(-jnp.tan(delta) ** 2 * (jnp.cos(phi) ** 2 / ax**2 + jnp.sin(phi) ** 2 / ay**2))
     k = k / (ax * ay)
     if normalization == "ward1992":
@@ -259,5 +271,5 @@ def ward_brdf_angles(
         raise ValueError(
             f"normalization={normalization!r} is not one of {', '.join(map(repr, NORMALIZATIONS))}"
         )
-    rho_s = _rho_s_rgb(params)
-    return jnp.asarray(params.rho_d) / jnp.pi + rho_s * (n * k)[..., None]
+    rho_d, rho_s, spec = _broadcast_leading((params.rho_d, 1), (_rho_s_rgb(params), 1), ((n * k)[..., None], 1))
+    return rho_d / jnp.pi + rho_s * spec
