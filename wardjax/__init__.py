@@ -18,4 +18,20 @@ from .ward import WardParams as WardParams
 from .ward import ward_brdf as ward_brdf
 from .ward import ward_brdf_angles as ward_brdf_angles
 
+# --- smartphone method (issue 4): colour, Fresnel, gratings and the α model
+from .color import delta_E_CIE1976 as delta_E_CIE1976
+from .color import delta_E_CIE2000 as delta_E_CIE2000
+from .color import diffuse_from_srgb as diffuse_from_srgb
+from .fresnel import fresnel_reflectance as fresnel_reflectance
+from .fresnel import specular_from_fresnel as specular_from_fresnel
+from .fresnel import specular_rgb_metal as specular_rgb_metal
+from .psychophysics import AlphaModel as AlphaModel
+from .psychophysics import AlphaPosterior as AlphaPosterior
+from .psychophysics import NotConvergedError as NotConvergedError
+from .psychophysics import cpd_to_ppb as cpd_to_ppb
+from .psychophysics import fit_smartphone as fit_smartphone
+from .psychophysics import ppb_to_cpd as ppb_to_cpd
+from .psychophysics import write_gratings as write_gratings
+# --- end smartphone method
+
 __version__ = "0.1.0"

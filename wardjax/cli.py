@@ -45,6 +45,32 @@ def demo(out_dir: Path, scanlines: int, seed: int) -> None:
     run_scanline_demo(out_dir, scanlines=scanlines, seed=seed, console=console)
 
 
+# --------------------------------------------------------------------------- gratings (smartphone method)
+
+
+@main.command()
+@click.option("--display", "display_name", default="iphone5s", show_default=True,
+              help="Display in calibration/smartphone_setup.toml.")
+@click.option("--viewing", "viewing_name", default="paper", show_default=True,
+              help="Viewing geometry in calibration/smartphone_setup.toml (for the CPD column).")
+@click.option("--out", "out_dir", type=click.Path(file_okay=False, path_type=Path), required=True,
+              help="Folder for the PNG set and gratings.csv.")
+@click.option("--orientation", type=click.Choice(["vertical", "horizontal"]), default="vertical",
+              show_default=True)
+def gratings(display_name: str, viewing_name: str, out_dir: Path, orientation: str) -> None:
+    """Write the square-wave grating PNGs (1 PNG per whole PPB) to load onto the phone."""
+    from .psychophysics import write_gratings
+
+    try:
+        paths = write_gratings(out_dir, display_name, viewing_name, orientation=orientation)
+    except (ValueError, OSError) as exc:
+        _fail(str(exc))
+    console.print(f"wrote {len(paths)} gratings and gratings.csv to {out_dir}")
+
+
+# --------------------------------------------------------------------------- end gratings
+
+
 if __name__ == "__main__":  # pragma: no cover
     main()
 
