@@ -34,4 +34,26 @@ from .psychophysics import ppb_to_cpd as ppb_to_cpd
 from .psychophysics import write_gratings as write_gratings
 # --- end smartphone method
 
+# --- capture pipeline (issue 3): capture folders, geometry, reconstruction, fit, exports, batches
+from .batch import BatchItem as BatchItem
+from .batch import run_batch as run_batch
+from .capture import Capture as Capture
+from .capture import CaptureError as CaptureError
+from .capture import load_capture as load_capture
+from .capture_sim import SensorNoise as SensorNoise
+from .capture_sim import simulate_capture as simulate_capture
+from .export import radiance_material as radiance_material
+from .export import radiance_metal as radiance_metal
+from .export import radiance_rgb as radiance_rgb
+from .export import write_capture_outputs as write_capture_outputs
+from .geometry import Camera as Camera
+from .geometry import PixelGeometry as PixelGeometry
+from .geometry import Rig as Rig
+from .geometry import pixel_geometry as pixel_geometry
+from .pipeline import CaptureFit as CaptureFit
+from .pipeline import fit_capture as fit_capture
+from .reconstruct import MaskReason as MaskReason
+from .reconstruct import reconstruct_brdf as reconstruct_brdf
+# --- end capture pipeline
+
 __version__ = "0.1.0"

@@ -34,15 +34,13 @@ def _fail(message: str) -> None:
 
 @main.command()
 @click.option("--out", "out_dir", type=click.Path(file_okay=False, path_type=Path), default=Path("demo-output"),
-              show_default=True, help="Folder for the results.")
-@click.option("--scanlines", type=click.IntRange(8, 100_000), default=64, show_default=True,
-              help="Scanlines per material.")
+              show_default=True, help="Folder for the simulated captures and the results.")
 @click.option("--seed", type=int, default=0, show_default=True)
-def demo(out_dir: Path, scanlines: int, seed: int) -> None:
-    """Simulate the desk and marble of the paper's Table 1, fit them, compare with the truth."""
-    from .demo import run_scanline_demo
+def demo(out_dir: Path, seed: int) -> None:
+    """Simulate the desk and marble captures of the paper's Table 1, fit them, compare with the truth."""
+    from .demo import run_capture_demo
 
-    run_scanline_demo(out_dir, scanlines=scanlines, seed=seed, console=console)
+    run_capture_demo(out_dir, seed=seed, console=console)
 
 
 # --------------------------------------------------------------------------- gratings (smartphone method)
@@ -69,6 +67,101 @@ def gratings(display_name: str, viewing_name: str, out_dir: Path, orientation: s
 
 
 # --------------------------------------------------------------------------- end gratings
+
+
+# --------------------------------------------------------------------------- capture pipeline (issue 3)
+
+
+@main.command("fit")
+@click.argument("paths", nargs=-1, required=True, type=click.Path(path_type=Path))
+@click.option("--out", "out_dir", type=click.Path(file_okay=False, path_type=Path), required=True,
+              help="Folder for the results: one subfolder per capture and summary.csv.")
+@click.option("--force", is_flag=True, help="Refit captures whose results are already complete.")
+@click.option("--quiet", is_flag=True, help="No progress bar or table.")
+def fit_cmd(paths: tuple[Path, ...], out_dir: Path, force: bool, quiet: bool) -> None:
+    """Fit capture folders (or folders of them): params.json, ρd texture, scanline plot, material.rad.
+
+    A capture that cannot be used is reported with one line and the batch goes
+    on; the exit status is 2 if any capture failed. Rerunning skips finished
+    captures unless --force.
+    """
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+
+    from .batch import find_captures, run_batch
+
+    err = Console(stderr=True)
+    missing = [str(p) for p in paths if not p.exists()]
+    if missing:
+        _fail(f"{missing[0]}: no such capture folder")
+    if not find_captures(paths):
+        _fail("no capture folders found")
+    with Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
+                  console=err, disable=quiet, transient=True) as bar:
+        task = bar.add_task("fitting", total=None)
+
+        def on_start(i, n, name):
+            bar.update(task, total=n, completed=i, description=f"fitting {name}")
+
+        def progress(i, n, item):
+            bar.update(task, completed=i + 1)
+            if item.status == "error":
+                err.print(f"[bold red]error:[/] {item.name}: {item.error}", highlight=False, soft_wrap=True)
+
+        items = run_batch(paths, out_dir, force=force, progress=progress, on_start=on_start)
+    if not quiet:
+        from rich.table import Table
+
+        t = Table(title=f"{len(items)} capture(s) → {out_dir}/summary.csv")
+        for col in ("capture", "status", "ρs", "αx", "αy", "χ²/dof"):
+            t.add_column(col)
+        for it in items:
+            if it.params:
+                p, e = it.params["params"], it.params["stderr"]
+                pm = lambda k: f"{p[k]:.4f} ± {e[k]:.4f}" if p[k] is not None and e[k] is not None else "–"  # noqa: E731
+                rc = it.params["fit"]["reduced_chi2"]
+                t.add_row(it.name, "skipped (done)" if it.skipped else "ok", pm("rho_s"), pm("alpha_x"),
+                          pm("alpha_y"), f"{rc:.3g}" if rc is not None else "–")
+            else:
+                t.add_row(it.name, "[red]error[/]", "", "", "", "")
+        console.print(t)
+    if any(it.status == "error" for it in items):
+        sys.exit(2)
+
+
+@main.command("simulate")
+@click.argument("out_dir", type=click.Path(file_okay=False, path_type=Path))
+@click.option("--material", type=click.Choice(["desk", "marble"]), default=None,
+              help="Take the parameters of the image-based paper's Table 1.")
+@click.option("--rho-d", nargs=3, type=float, default=(0.6, 0.5, 0.4), show_default=True)
+@click.option("--rho-s", type=float, default=0.04, show_default=True)
+@click.option("--alpha-x", type=float, default=0.12, show_default=True)
+@click.option("--alpha-y", type=float, default=0.15, show_default=True)
+@click.option("--texture", type=click.Choice(["wood", "marble", "none"]), default="wood", show_default=True)
+@click.option("--encoding", type=click.Choice(["srgb", "gamma2.2", "linear"]), default="srgb", show_default=True)
+@click.option("--bit-depth", type=click.Choice(["8", "16"]), default="8", show_default=True)
+@click.option("--format", "image_format", type=click.Choice(["png", "tif", "jpg"]), default="png", show_default=True)
+@click.option("--size", nargs=2, type=click.IntRange(16, 20000), default=(320, 240), show_default=True,
+              help="Image width and height in pixels.")
+@click.option("--seed", type=int, default=0, show_default=True)
+def simulate_cmd(out_dir, material, rho_d, rho_s, alpha_x, alpha_y, texture, encoding, bit_depth, image_format,
+                 size, seed) -> None:
+    """Write a simulated capture folder (lit/dark images + capture.toml + truth) to OUT_DIR."""
+    from ._data import table1_materials
+    from .capture_sim import simulate_capture
+    from .ward import WardParams
+
+    p = table1_materials()[material] if material else WardParams(rho_d=rho_d, rho_s=rho_s, alpha_x=alpha_x,
+                                                                   alpha_y=alpha_y)
+    try:
+        cap = simulate_capture(p, out_dir, seed=seed, image_size=tuple(size), texture=texture, encoding=encoding,
+                               bit_depth=int(bit_depth), image_format=image_format)
+    except ValueError as e:
+        _fail(str(e).splitlines()[0])
+    console.print(f"wrote capture [bold]{cap.name}[/] ({cap.rig.camera.width}×{cap.rig.camera.height}, "
+                  f"{encoding} {bit_depth}-bit {image_format}) to {out_dir}/")
+
+
+# --------------------------------------------------------------------------- end capture pipeline
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -1,11 +1,16 @@
-"""The demo behind ``make demo``: Table 1 materials, simulated, fitted, compared."""
+"""The demo behind ``make demo``: Table 1 captures, simulated, fitted with ``wardjax fit``, compared.
+
+1. Simulate the desk and marble of the image-based paper's Table 1 (both
+   anisotropic as tabulated, grey ρd, with a wood-like and a marble-like
+   texture) as capture folders in ``OUT/captures/`` — only if not present.
+2. Fit them exactly as ``wardjax fit OUT/captures --out OUT/fits`` does
+   (:func:`wardjax.batch.run_batch`): params.json, ρd texture, scanline plot,
+   Radiance material per capture, and ``summary.csv``.
+3. Print true vs fitted ± 1σ.
+"""
 
 from __future__ import annotations
 
-import json
-import os
-import tempfile
-import time
 from pathlib import Path
 
 import numpy as np
@@ -13,77 +18,56 @@ from rich.console import Console
 from rich.table import Table
 
 from ._data import table1_materials
-from .fit import fit_scanlines
-from .simulate import ScanlineRig, simulate_scanlines
-from .ward import WardParams
+from .export import write_json_atomic
 
-__all__ = ["run_scanline_demo", "write_json_atomic"]
+__all__ = ["run_capture_demo", "write_json_atomic"]
 
-
-def write_json_atomic(path: Path, obj) -> None:
-    """Write JSON so that a reader never sees a half-written file."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    with os.fdopen(fd, "w") as fh:
-        json.dump(obj, fh, indent=2)
-        fh.write("\n")
-    os.replace(tmp, path)
+TEXTURES = {"desk": "wood", "marble": "marble"}
 
 
-def _pm(value: float, err: float, digits: int = 4) -> str:
-    return f"{value:.{digits}f} ± {err:.{digits}f}"
+def _pm(value, err, digits: int = 4) -> str:
+    if value is None:
+        return "–"
+    return f"{value:.{digits}f} ± {err:.{digits}f}" if err is not None else f"{value:.{digits}f}"
 
 
-def run_scanline_demo(out_dir: Path, *, scanlines: int = 64, seed: int = 0, console: Console | None = None) -> dict:
-    """Simulate each Table 1 material on ``scanlines`` scanlines, fit, print and save.
+def run_capture_demo(out_dir, *, seed: int = 0, image_size=(480, 360), console: Console | None = None) -> dict:
+    """Simulate (if absent), fit and compare the Table 1 captures; return ``{name: params.json document}``."""
+    from .batch import run_batch
+    from .capture import CAPTURE_FILE
+    from .capture_sim import simulate_capture
 
-    The scanlines run along y at x offsets spread over ±40 mm in the papers'
-    rig (lamp and camera 600–700 mm away in the plane x = 0), σ = 1 % of f.
-    Each scanline gets its own ρd (a texture: ±10 % around the tabulated
-    grey). Per-scanline isotropic fits come first; the joint fit
-    (``combined()``) identifies αx and αy.
-    """
     console = console or Console()
     out_dir = Path(out_dir)
-    rng = np.random.default_rng(seed)
-    rig = ScanlineRig.from_angles()
-    table = Table(title="Ward parameters: true vs fitted ± 1σ (joint anisotropic fit over all scanlines)")
-    for col in ("material", "", "ρd", "ρs", "αx", "αy", "χ²/dof", "status"):
+    cap_root = out_dir / "captures"
+    truth = table1_materials()
+    for i, (name, p) in enumerate(truth.items()):
+        folder = cap_root / name
+        if not (folder / CAPTURE_FILE).is_file():
+            console.print(f"simulating capture [bold]{name}[/] → {folder}/")
+            simulate_capture(p, folder, seed=seed + i, image_size=image_size, texture=TEXTURES.get(name, "wood"),
+                             model="anisotropic", name=name)
+    console.print(f"fitting: wardjax fit {cap_root} --out {out_dir / 'fits'}")
+    items = run_batch([cap_root / n for n in truth], out_dir / "fits")
+    table = Table(title="Table 1 materials: true vs fitted ± 1σ (joint anisotropic fit, Ward 1992 normalisation)")
+    for col in ("material", "", "ρd", "ρs", "αx", "αy", "fit"):
         table.add_column(col)
     results = {}
-    for name, truth in table1_materials().items():
-        x0 = np.linspace(-40.0, 40.0, scanlines)
-        texture = 1.0 + 0.1 * rng.uniform(-1, 1, (scanlines, 1))
-        p = WardParams(
-            rho_d=np.asarray(truth.rho_d) * texture,
-            rho_s=np.full(scanlines, truth.rho_s),
-            alpha_x=np.full(scanlines, truth.alpha_x),
-            alpha_y=np.full(scanlines, truth.alpha_y),
-        )
-        data = simulate_scanlines(p, x_offsets=x0, rig=rig, seed=rng)
-        t0 = time.perf_counter()
-        res = fit_scanlines(data.f_r, data.wi, data.wo, "isotropic", weights=1.0 / data.sigma**2)
-        comb = res.combined("anisotropic")
-        elapsed = time.perf_counter() - t0
-        c, e = comb.params, comb.stderr
-        table.add_row(name, "true", f"{float(truth.rho_d[0]):.4f}", f"{float(truth.rho_s):.4f}",
-                      f"{float(truth.alpha_x):.4f}", f"{float(truth.alpha_y):.4f}", "", "")
-        table.add_row("", "fitted", _pm(float(np.mean(c.rho_d)), float(np.mean(e.rho_d))),
-                      _pm(float(c.rho_s), float(e.rho_s)), _pm(float(c.alpha_x), float(e.alpha_x)),
-                      _pm(float(c.alpha_y), float(e.alpha_y)), f"{comb.reduced_chi2:.3f}",
-                      comb.status.name.lower(), end_section=True)
-        results[name] = {
-            "true": {"rho_d": float(truth.rho_d[0]), "rho_s": float(truth.rho_s),
-                     "alpha_x": float(truth.alpha_x), "alpha_y": float(truth.alpha_y)},
-            "fitted": {"rho_d": np.asarray(c.rho_d).tolist(), "rho_s": float(c.rho_s),
-                       "alpha_x": float(c.alpha_x), "alpha_y": float(c.alpha_y)},
-            "stderr": {"rho_d": np.asarray(e.rho_d).tolist(), "rho_s": float(e.rho_s),
-                       "alpha_x": float(e.alpha_x), "alpha_y": float(e.alpha_y)},
-            "chi2": comb.chi2, "dof": comb.dof, "status": comb.status.name.lower(),
-            "scanlines": scanlines, "per_scanline_converged": int(np.sum(res.ok)),
-            "normalization": comb.normalization, "fit_seconds": elapsed,
-        }
-        write_json_atomic(out_dir / f"{name}.json", results[name])
+    for it in items:
+        t = truth[it.name]
+        table.add_row(it.name, "true", f"{float(np.mean(t.rho_d)):.4f}", f"{float(t.rho_s):.4f}",
+                      f"{float(t.alpha_x):.4f}", f"{float(t.alpha_y):.4f}", "")
+        if it.status != "ok":
+            table.add_row("", "[red]error[/]", it.error, "", "", "", "", end_section=True)
+            continue
+        p, e = it.params["params"], it.params["stderr"]
+        table.add_row("", "fitted", _pm(float(np.mean(p["rho_d"])), float(np.mean(e["rho_d"]))),
+                      _pm(p["rho_s"], e["rho_s"]), _pm(p["alpha_x"], e["alpha_x"]), _pm(p["alpha_y"], e["alpha_y"]),
+                      it.params["fit"]["status"], end_section=True)
+        results[it.name] = it.params
     console.print(table)
-    console.print(f"Results written to [bold]{out_dir}/[/] (desk.json, marble.json).")
+    console.print(f"Results in [bold]{out_dir / 'fits'}/[/] (per capture: params.json, rho_d.tif/.png, "
+                  "scanline.png, material.rad; summary.csv).")
+    write_json_atomic(out_dir / "demo.json", {k: {"params": v["params"], "stderr": v["stderr"]}
+                                              for k, v in results.items()})
     return results
