@@ -50,6 +50,12 @@ GLOSS_ORDER = (95, 75, 50, 30, 12, 6)
 PHYSICAL_GLOSS = (95, 75, 50, 30)
 
 
+def _read_csv(name: str) -> list[dict]:
+    """Rows of a ``calibration/`` CSV, skipping ``#`` comment lines."""
+    with open(calibration_path(name), encoding="utf-8") as fh:
+        return list(csv.DictReader(r for r in fh if not r.startswith("#")))
+
+
 @lru_cache(maxsize=1)
 def load_table1() -> dict[str, NDArray]:
     """Table 1 as arrays of shape (4 lightness, 6 gloss): ``lobe_sd_deg``, ``ppb``, ``alpha``.
@@ -57,14 +63,12 @@ def load_table1() -> dict[str, NDArray]:
     Rows follow :data:`NCS_ORDER`, columns :data:`GLOSS_ORDER`; also ``rho_d`` (4,), the
     NCS ρd estimates of the paper's section 7.
     """
-    rows = [r for r in open(calibration_path("smartphone_table1.csv"), encoding="utf-8") if not r.startswith("#")]
     out = {k: np.full((4, 6), np.nan) for k in ("lobe_sd_deg", "ppb", "alpha")}
-    for row in csv.DictReader(rows):
+    for row in _read_csv("smartphone_table1.csv"):
         i, j = NCS_ORDER.index(row["ncs"]), GLOSS_ORDER.index(int(row["gloss"]))
         for k in out:
             out[k][i, j] = float(row[k])
-    rows = [r for r in open(calibration_path("smartphone_ncs_rho_d.csv"), encoding="utf-8") if not r.startswith("#")]
-    rho = {r["ncs"]: float(r["rho_d"]) for r in csv.DictReader(rows)}
+    rho = {r["ncs"]: float(r["rho_d"]) for r in _read_csv("smartphone_ncs_rho_d.csv")}
     out["rho_d"] = np.array([rho[n] for n in NCS_ORDER])
     return out
 

@@ -5,25 +5,27 @@
   2014"``, X-Rite's) or computed from its reflectance spectra under D50.
 - :func:`simulate_colorchecker_photo`: a synthetic, ideal camera's photo of the chart.
 - :func:`colorchecker_patch_regions`: patch boxes from a manual grid layout.
-- :func:`fit_camera_correction` / :func:`apply_camera_correction`: a 3×3 matrix fitted
-  on chart patches in linear RGB (white E).
+- :func:`fit_camera_correction`: a chart-based camera correction (a per-channel power
+  and a 3×3 matrix in linear RGB, white E) fitted on CIELAB differences.
 """
 
 from __future__ import annotations
 
 import io
 from collections.abc import Sequence
+from dataclasses import dataclass
 
 import colour
 import imageio.v3 as iio
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from .color import Lab_to_diffuse, delta_E_CIE1976, diffuse_from_srgb, diffuse_to_Lab
+from .color import delta_E_CIE1976, diffuse_from_srgb, diffuse_to_Lab
 
 __all__ = [
     "COLORCHECKER_NAMES",
-    "apply_camera_correction",
+    "CameraCorrection",
+    "colorchecker_delta_E",
     "colorchecker_patch_regions",
     "colorchecker_reference_Lab",
     "colorchecker_rho_d",
@@ -46,9 +48,11 @@ def _sds():
 
 def _XYZ_of_spectra(illuminant: str) -> NDArray:
     """XYZ (perfect white: Y = 1) of the 24 chart spectra under a CIE illuminant."""
-    cmfs = colour.MSDS_CMFS[_CMFS]
-    ill = colour.SDS_ILLUMINANTS[illuminant]
-    return np.array([colour.sd_to_XYZ(sd, cmfs, ill) for sd in _sds()]) / 100.0
+    sds = _sds()
+    shape = sds[0].shape                       # 380–730 nm, 10 nm: align the CMFs and illuminant to it
+    cmfs = colour.MSDS_CMFS[_CMFS].copy().align(shape)
+    ill = colour.SDS_ILLUMINANTS[illuminant].copy().align(shape)
+    return np.array([colour.sd_to_XYZ(sd, cmfs, ill, method="Integration") for sd in sds]) / 100.0
 
 
 def colorchecker_reference_Lab(source: str = "chromaticities") -> NDArray:
@@ -96,7 +100,7 @@ def simulate_colorchecker_photo(
     rgb_lin = np.asarray(colour.XYZ_to_RGB(_XYZ_of_spectra("D65"), "sRGB", apply_cctf_encoding=False))
     if clip:
         rgb_lin = np.clip(rgb_lin, 0.0, 1.0)
-    enc = np.asarray(colour.cctf_encoding(np.maximum(rgb_lin, 0.0), function="sRGB")) * np.sign(rgb_lin)
+    enc = np.sign(rgb_lin) * np.asarray(colour.cctf_encoding(np.abs(rgb_lin), function="sRGB"))
     pitch = patch_px + gap_px
     h, w = 4 * pitch + gap_px, 6 * pitch + gap_px
     img = np.full((h, w, 3), float(colour.cctf_encoding(0.18, function="sRGB")))
@@ -156,23 +160,56 @@ def colorchecker_rho_d(image: ArrayLike, regions, *, decoding="gamma2.2") -> NDA
     return np.array([diffuse_from_srgb(image, r, decoding=decoding) for r in regions])
 
 
-def fit_camera_correction(rho_d: ArrayLike, reference_Lab: ArrayLike) -> NDArray:
-    """3×3 matrix ``M`` minimising ``Σ ‖M ρd − ρd_ref‖²`` in linear RGB (white E).
+@dataclass(frozen=True)
+class CameraCorrection:
+    """``ρd' = M · ρd^γ`` (power per channel, then a 3×3 matrix), in linear RGB (white E).
 
-    ``ρd_ref`` are the reference Labs (D50) taken back to ρd through
-    :func:`~wardjax.color.Lab_to_diffuse`. Needs at least 3 patches (use ≥ 6).
+    ``γ`` corrects a camera whose tone curve is not the assumed decoding (γ = 1: none);
+    ``M`` its primaries and white balance.
     """
+
+    gamma: float
+    matrix: NDArray
+
+    def apply(self, rho_d: ArrayLike) -> NDArray:
+        r = np.clip(np.asarray(rho_d, dtype=np.float64), 1e-6, None)
+        return r**self.gamma @ self.matrix.T
+
+
+def fit_camera_correction(rho_d: ArrayLike, reference_Lab: ArrayLike, *, tone: bool = True) -> CameraCorrection:
+    """Fit :class:`CameraCorrection` to chart patches by least squares on CIELAB (D50) differences.
+
+    Parameters
+    ----------
+    rho_d
+        The method's ρd of the patches, (N, 3); leave out clipped patches.
+    reference_Lab
+        Their reference CIELAB under D50, (N, 3).
+    tone
+        Fit the exponent γ too (10 parameters, N ≥ 4); else γ = 1 (a plain 3×3 matrix, N ≥ 3).
+
+    The residuals are the Lab differences, so the fit minimises Σ ΔE*ab² directly.
+    """
+    from scipy.optimize import least_squares
+
     x = np.asarray(rho_d, dtype=np.float64)
-    y = Lab_to_diffuse(reference_Lab, "D50")
-    if x.ndim != 2 or x.shape[-1] != 3 or x.shape[0] < 3:
-        raise ValueError(f"rho_d must be (N ≥ 3, 3); got shape {x.shape}")
-    m, *_ = np.linalg.lstsq(x, y, rcond=None)
-    return m.T
+    ref = np.asarray(reference_Lab, dtype=np.float64)
+    need = 4 if tone else 3
+    if x.ndim != 2 or x.shape[-1] != 3 or x.shape[0] < need or ref.shape != x.shape:
+        raise ValueError(f"rho_d and reference_Lab must both be (N ≥ {need}, 3); got {x.shape} and {ref.shape}")
+    x = np.clip(x, 1e-6, None)
 
+    def unpack(p):
+        return (float(np.exp(p[0])) if tone else 1.0), p[-9:].reshape(3, 3)
 
-def apply_camera_correction(rho_d: ArrayLike, matrix: ArrayLike) -> NDArray:
-    """``M ρd`` on the last axis."""
-    return np.asarray(rho_d, dtype=np.float64) @ np.asarray(matrix, dtype=np.float64).T
+    def residual(p):
+        g, m = unpack(p)
+        return (diffuse_to_Lab(np.clip(x**g @ m.T, 1e-6, None), "D50") - ref).ravel()
+
+    p0 = np.r_[[0.0] if tone else [], np.eye(3).ravel()]
+    sol = least_squares(residual, p0)
+    g, m = unpack(sol.x)
+    return CameraCorrection(gamma=g, matrix=m)
 
 
 def colorchecker_delta_E(rho_d: ArrayLike, reference_Lab: ArrayLike) -> NDArray:

@@ -117,10 +117,10 @@ def specular_from_fresnel(n: ArrayLike = 1.5, k: ArrayLike = 0.0, *, max_angle_d
 
 @lru_cache(maxsize=1)
 def _metal_table() -> dict[str, np.ndarray]:
-    path = calibration_path("metal_ior.csv")
-    rows = [r for r in open(path, encoding="utf-8") if not r.startswith("#")]
+    with open(calibration_path("metal_ior.csv"), encoding="utf-8") as fh:
+        rows = list(csv.DictReader(r for r in fh if not r.startswith("#")))
     out: dict[str, list] = {}
-    for row in csv.DictReader(rows):
+    for row in rows:
         out.setdefault(row["metal"], []).append((float(row["wavelength_nm"]), float(row["n"]), float(row["k"])))
     return {m: np.array(v) for m, v in out.items()}
 
