@@ -69,8 +69,9 @@ def fresnel_reflectance(cos_theta: ArrayLike, n: ArrayLike, k: ArrayLike = 0.0) 
     Array
         F in [0, 1], the broadcast shape. jit/vmap/grad friendly (complex arithmetic in jnp).
     """
-    c = jnp.clip(jnp.asarray(cos_theta), 0.0, 1.0)
-    eta = jnp.asarray(n) + 1j * jnp.asarray(k)
+    c, n, k = jnp.broadcast_arrays(jnp.asarray(cos_theta), jnp.asarray(n), jnp.asarray(k))
+    c = jnp.clip(c, 0.0, 1.0)
+    eta = n + 1j * k
     eta2 = eta * eta
     s2 = 1.0 - c * c
     g = jnp.sqrt(eta2 - s2)
@@ -110,8 +111,10 @@ def specular_from_fresnel(n: ArrayLike = 1.5, k: ArrayLike = 0.0, *, max_angle_d
     theta = 0.5 * tmax * (_GL_NODES + 1.0)
     w = 0.5 * tmax * _GL_WEIGHTS * np.cos(theta) * np.sin(theta)
     with jax.enable_x64(True):
-        f = fresnel_reflectance(np.cos(theta), n_arr[..., None], k_arr[..., None])
-        rho = np.asarray(jnp.sum(f * w, axis=-1) / np.sum(w))
+        shape = np.broadcast_shapes(n_arr.shape, k_arr.shape) + theta.shape
+        f = fresnel_reflectance(np.broadcast_to(np.cos(theta), shape), np.broadcast_to(n_arr[..., None], shape),
+                                np.broadcast_to(k_arr[..., None], shape))
+        rho = np.asarray(f) @ w / np.sum(w)
     return float(rho) if rho.ndim == 0 else rho
 
 
