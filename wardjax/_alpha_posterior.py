@@ -503,7 +503,7 @@ def alpha_posterior(
     seed: int,
     n_walkers: int = 32,
     burn: int = 300,
-    chunk: int = 2000,
+    chunk: int = 1000,
     max_steps: int = 20000,
     n_tau: float = 50.0,
     display=None,
