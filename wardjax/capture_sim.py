@@ -337,7 +337,7 @@ def simulate_capture(
 
     fd, tmp = tempfile.mkstemp(dir=out, prefix=".truth_rho_d.", suffix=".tif")
     os.close(fd)
-    tifffile.imwrite(tmp, truth)
+    tifffile.imwrite(tmp, truth, photometric="rgb")
     os.replace(tmp, out / "truth_rho_d.tif")
 
     if model is None:
