@@ -242,7 +242,7 @@ class AlphaModel:
         return alpha_posterior(self, ppb=ppb, rho_d=rho_d, ppb_mean=ppb_mean, n_observers=n_observers,
                                seed=seed, **kwargs)
 
-    def posterior_batch(self, ppb, rho_d, *, seed: int, **kwargs):
+    def posterior_batch(self, ppb=None, rho_d=None, *, seed: int, **kwargs):
         """Many independent posteriors in one lock-step emcee run; see :func:`wardjax._alpha_posterior.alpha_posterior_batch`."""
         from ._alpha_posterior import alpha_posterior_batch
 

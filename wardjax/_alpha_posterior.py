@@ -363,6 +363,7 @@ class AlphaPosteriorBatch:
     converged: NDArray
     n_steps: int
     levels: tuple = _LEVELS
+    params: list | None = None
 
     def interval(self, level: float = 0.95) -> NDArray:
         """(B, 2) equal-tailed intervals; ``level`` is 0.68 or 0.95."""
@@ -583,8 +584,10 @@ def alpha_posterior(
 def alpha_posterior_batch(
     model,
     *,
-    ppb,
+    ppb=None,
     rho_d,
+    ppb_mean=None,
+    n_observers=None,
     seed: int,
     n_walkers: int = 32,
     burn: int = 300,
@@ -592,6 +595,7 @@ def alpha_posterior_batch(
     max_steps: int = 8000,
     n_tau: float = 50.0,
     thin: int = 5,
+    keep_samples: bool = False,
 ) -> AlphaPosteriorBatch:
     """``B`` independent posteriors (individual thresholds) in one lock-step emcee run.
 
@@ -599,38 +603,53 @@ def alpha_posterior_batch(
     ----------
     ppb
         ``(B, M)`` whole-pixel thresholds, ``M`` observers per surface (pad with 0 for
-        fewer; 0 means "no observer").
+        fewer; 0 means "no observer"); or
+    ppb_mean, n_observers
+        ``(B,)`` published mean thresholds and the number of observers behind each.
     rho_d
         ``(B,)`` grey or ``(B, 3)`` RGB.
     thin
         Keep every ``thin``-th step (memory); τ is reported in steps.
+    keep_samples
+        Also keep each surface's named draws (``params``, a list of dicts).
 
     Non-converged surfaces are flagged in ``converged``, not raised.
     """
-    k_all = np.asarray(ppb)
-    if k_all.ndim != 2:
-        raise ValueError(f"ppb must be (B, M); got shape {k_all.shape}")
     rho_all = np.asarray(rho_d, dtype=np.float64)
     k_min, k_max = model.display.ppb_min, model.display.ppb_max
-    plist = []
-    for row in k_all:
-        row = row[row != 0]
-        plist.append(_as_thresholds(row, k_min, k_max))
+    if (ppb is None) == (ppb_mean is None):
+        raise ValueError("give either ppb (B, M) or ppb_mean (B,) with n_observers (B,), not both")
+    if ppb is not None:
+        k_all = np.asarray(ppb)
+        if k_all.ndim != 2:
+            raise ValueError(f"ppb must be (B, M); got shape {k_all.shape}")
+        plist = [_as_thresholds(row[row != 0], k_min, k_max) for row in k_all]
+        mlist = nlist = [None] * len(plist)
+    else:
+        mlist = [float(m) for m in np.atleast_1d(ppb_mean)]
+        nlist = [int(n) for n in np.broadcast_to(np.asarray(n_observers), (len(mlist),))]
+        if any(not (k_min <= m <= k_max) for m in mlist) or any(n < 1 for n in nlist):
+            raise ValueError(f"ppb_mean must lie in {k_min}..{k_max} and n_observers be ≥ 1")
+        plist = [None] * len(mlist)
     rlist = [_as_rho_d(r) for r in rho_all]
     if len(rlist) != len(plist):
-        raise ValueError(f"rho_d has {len(rlist)} surfaces, ppb {len(plist)}")
-    data, hyper = _problem_arrays(model, plist, [None] * len(plist), [None] * len(plist), rlist)
+        raise ValueError(f"rho_d has {len(rlist)} surfaces, the thresholds {len(plist)}")
+    data, hyper = _problem_arrays(model, plist, mlist, nlist, rlist)
     chain, acc, tau, steps = _run(data, hyper, n_walkers=n_walkers, seed=seed, burn=burn, chunk=chunk,
                                   max_steps=max_steps, thin=thin, n_tau=n_tau)
     nb = len(plist)
     q = np.empty((nb, len(_LEVELS)))
     mean = np.empty(nb)
+    draws = []
     for b in range(nb):
-        alpha = _derived(chain[:, b], data[5][b], data[6][b])["alpha"]
-        q[b] = np.quantile(alpha, _LEVELS)
-        mean[b] = alpha.mean()
+        d = _derived(chain[:, b], data[5][b], data[6][b])
+        q[b] = np.quantile(d["alpha"], _LEVELS)
+        mean[b] = d["alpha"].mean()
+        if keep_samples:
+            draws.append(d)
     return AlphaPosteriorBatch(quantiles=q, mean=mean, tau_max=tau.max(axis=1), acceptance=acc,
-                               converged=steps >= n_tau * tau.max(axis=1), n_steps=steps)
+                               converged=steps >= n_tau * tau.max(axis=1), n_steps=steps,
+                               params=draws if keep_samples else None)
 
 
 def simulate_observers(model, rho_d, n_observers: int, rng: np.random.Generator) -> tuple[NDArray, dict]:
