@@ -333,10 +333,10 @@ def _assemble(sol, f, wi, wo, w, model, normalization, solver) -> ScanlineFit:
 # --------------------------------------------------------------------------- optimistix paths
 
 
-def _iso_model(y, p: _varpro.Prepared):
-    """Residual of the full isotropic problem in scaled coordinates y = (ρd RGB, log ρs, log α)."""
+def _iso_model(y, u, v, g):
+    """Model of the full isotropic problem in scaled coordinates y = (ρd RGB, log ρs, log α)."""
     rho_d, log_rs, log_a = y[:3], y[3], y[4]
-    b, _ = _varpro.basis(log_a[None], p.u, p.v, p.g, True)
+    b, _ = _varpro.basis(log_a[None], u, v, g, True)
     f_model = rho_d[None, :] / jnp.pi + jnp.exp(log_rs) * b[:, None]
     return f_model
 
@@ -353,7 +353,7 @@ def _optimistix_scanline(f, wi, wo, w, normalization):
     sw = jnp.sqrt(jnp.broadcast_to(w, f.shape))
 
     def residual(y, _):
-        return sw * (f - _iso_model(y, p))
+        return sw * (f - _iso_model(y, geom.u, geom.v, geom.g))
 
     solver = optx.LevenbergMarquardt(rtol=1e-10, atol=1e-12)
     sol = optx.least_squares(residual, solver, y0, max_steps=256, throw=False)
