@@ -92,9 +92,8 @@ def fit_cmd(paths: tuple[Path, ...], out_dir: Path, force: bool, quiet: bool) ->
     err = Console(stderr=True)
     missing = [str(p) for p in paths if not p.exists()]
     if missing:
-        _fail(f"{missing[0]}: no such capture folder")
-    if not find_captures(paths):
-        _fail("no capture folders found")
+        err.print(f"[bold red]error:[/] {missing[0]}: no such capture folder", highlight=False, soft_wrap=True)
+        sys.exit(2)
     with Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
                   console=err, disable=quiet, transient=True) as bar:
         task = bar.add_task("fitting", total=None)
