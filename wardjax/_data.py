@@ -25,7 +25,8 @@ def calibration_path(name: str) -> Path:
 
 def table1_materials() -> dict[str, WardParams]:
     """The desk and marble of the image-based paper's Table 1 (grey ρd)."""
-    rows = [r for r in open(calibration_path("table1_image_based.csv")) if not r.startswith("#")]
+    with open(calibration_path("table1_image_based.csv"), encoding="utf-8") as fh:
+        rows = [r for r in fh if not r.startswith("#")]
     out = {}
     for row in csv.DictReader(rows):
         rd = float(row["rho_d"])

@@ -173,54 +173,77 @@ def _check_choice(name, value, allowed):
         raise ValueError(f"{name}={value!r} is not one of {', '.join(map(repr, allowed))}")
 
 
-def _as_batch(name: str, x, dtype, shape: tuple[int, ...] | None = None) -> np.ndarray:
+def _as_batch(name: str, x, shape: tuple[int, ...] | None = None) -> np.ndarray:
     arr = np.asarray(x)
     if arr.dtype == object or not (np.issubdtype(arr.dtype, np.number) or arr.dtype == bool):
         raise TypeError(f"{name} must be a numeric array, got dtype {arr.dtype}")
     if shape is not None and arr.shape != shape:
         raise ValueError(f"{name} has shape {arr.shape}, expected {shape}")
-    return arr.astype(dtype, copy=False)
+    return arr
 
 
-def _validate(f_r, wi, wo, mask, weights, dtype):
+def _validate(f_r, wi, wo, mask, weights):
+    """Check shapes and types at the boundary (cheap); cleaning happens inside the kernel."""
     f = np.asarray(f_r)
     if f.ndim != 3 or f.shape[-1] != 3:
         raise ValueError(f"f_r must have shape (S, N, 3) (scanlines, samples, RGB), got {f.shape}")
     shape = f.shape
-    f = _as_batch("f_r", f, dtype)
-    wi = _as_batch("wi", wi, dtype, shape)
-    wo = _as_batch("wo", wo, dtype, shape)
+    f = _as_batch("f_r", f)
+    wi = _as_batch("wi", wi, shape)
+    wo = _as_batch("wo", wo, shape)
     s, n, _ = shape
-    w = np.ones((s, n, 1), dtype)
     if weights is not None:
-        wt = np.asarray(weights)
+        wt = _as_batch("weights", weights)
         if wt.shape == (s, n):
             wt = wt[..., None]
         if wt.shape not in ((s, n, 1), (s, n, 3)):
-            raise ValueError(f"weights must have shape (S, N) or (S, N, 3) = {(s, n)} or {shape}, got {np.shape(weights)}")
-        wt = wt.astype(dtype)
+            raise ValueError(
+                f"weights must have shape (S, N) or (S, N, 3) = {(s, n)} or {shape}, got {np.shape(weights)}"
+            )
         if np.any(wt < 0):
             raise ValueError("weights must be non-negative (they are 1/σ² per sample)")
-        w = w * wt
+        weights = wt
     if mask is not None:
         m = np.asarray(mask)
         if m.shape == (s, n):
             m = m[..., None]
         if m.shape not in ((s, n, 1), (s, n, 3)):
             raise ValueError(f"mask must have shape (S, N) or (S, N, 3), got {np.shape(mask)}")
-        w = w * m.astype(dtype)
-    finite = np.isfinite(f)
-    if w.shape[-1] == 1:
-        w = np.where(np.all(finite, axis=-1, keepdims=True), w, 0.0)
-    else:
-        w = np.where(finite, w, 0.0)
-    w = np.where(np.isfinite(w), w, 0.0).astype(dtype)
-    f = np.where(finite, f, 0.0)
-    directions_ok = np.all(np.isfinite(wi) & np.isfinite(wo), axis=-1, keepdims=True)
-    wi = np.where(directions_ok, wi, np.array([0.0, 0.0, 1.0], dtype))
-    wo = np.where(directions_ok, wo, np.array([0.0, 0.0, 1.0], dtype))
-    w = np.where(directions_ok, w, 0.0)
-    return f, wi, wo, w
+        mask = m.astype(bool, copy=False)
+    return f, wi, wo, mask, weights
+
+
+def _clean(f, wi, wo, mask, weights, dtype):
+    """Inside the jit: cast, zero the weight of unusable samples, make their values finite.
+
+    A sample (or, with per-channel weights or mask, a value) is unusable when
+    it is masked, non-finite, or has a non-finite direction. Returns
+    ``(f, wi, wo, w)`` with ``w`` of shape ``(S, N, C)``.
+    """
+    f, wi, wo = (jnp.asarray(a, dtype) for a in (f, wi, wo))
+    c = max(1 if weights is None else weights.shape[-1], 1 if mask is None else mask.shape[-1])
+    w = jnp.ones(f.shape[:2] + (c,), dtype)
+    if weights is not None:
+        w = w * jnp.asarray(weights, dtype)
+    if mask is not None:
+        w = jnp.where(mask, w, 0.0)
+    finite = jnp.isfinite(f)
+    fin = jnp.all(finite, axis=-1, keepdims=True) if c == 1 else finite
+    dirs_ok = jnp.all(jnp.isfinite(wi) & jnp.isfinite(wo), axis=-1, keepdims=True)
+    w = jnp.where(fin & dirs_ok & jnp.isfinite(w), w, 0.0)
+    up = jnp.asarray([0.0, 0.0, 1.0], dtype)[None, None, :]
+    return jnp.where(finite, f, 0.0), jnp.where(dirs_ok, wi, up), jnp.where(dirs_ok, wo, up), w
+
+
+@functools.partial(jax.jit, static_argnames=("iso", "rtol", "normalization", "dtype"))
+def _fast_chunk(f, wi, wo, mask, weights, *, iso, rtol, normalization, dtype):
+    f, wi, wo, w = _clean(f, wi, wo, mask, weights, dtype)
+    return _varpro.fit_chunk(f, wi, wo, w, iso=iso, rtol=rtol, normalization=normalization)
+
+
+@functools.partial(jax.jit, static_argnames=("normalization", "dtype"))
+def _clean_jit(f, wi, wo, mask, weights, *, normalization, dtype):
+    return _clean(f, wi, wo, mask, weights, dtype)
 
 
 def _buckets(s: int, chunk: int) -> list[tuple[int, int, int]]:
@@ -282,23 +305,23 @@ def fit_scanlines(
         raise ValueError(f"dtype must be float64 or float32, got {dtype}")
     if solver == "optimistix" and model != "isotropic":
         raise ValueError("solver='optimistix' fits the isotropic model; use res.combined() for anisotropy")
-    f, wi, wo, w = _validate(f_r, wi, wo, mask, weights, dtype)
+    f, wi, wo, mask, weights = _validate(f_r, wi, wo, mask, weights)
     iso = model == "isotropic"
     chunk = int(chunk_size or _CHUNK[dtype])
     s = f.shape[0]
+    rtol = 0.0 if dtype == np.float64 else 64 * float(np.finfo(dtype).eps)
     with jax.enable_x64(True):
         pieces = []
         for start, stop, rows in _buckets(s, chunk):
-            args = [jnp.asarray(_pad(a[start:stop], rows)) for a in (f, wi, wo, w)]
+            args = [None if a is None else jnp.asarray(_pad(a[start:stop], rows)) for a in (f, wi, wo, mask, weights)]
             if solver == "fast":
-                rtol = 0.0 if dtype == np.float64 else 64 * float(np.finfo(dtype).eps)
-                out = _varpro.fit_chunk_jit(*args, iso=iso, rtol=rtol, normalization=normalization)
+                out = _fast_chunk(*args, iso=iso, rtol=rtol, normalization=normalization, dtype=dtype)
             else:
-                out = _optimistix_chunk(*args, normalization=normalization)
+                out = _optimistix_chunk(*_clean(*args, dtype), normalization=normalization)
             pieces.append((out, stop - start))  # dispatched asynchronously
         sol = [jax.tree_util.tree_map(lambda a, n=n: np.asarray(a)[:n], o) for o, n in pieces]
         sol = jax.tree_util.tree_map(lambda *a: np.concatenate(a).astype(np.float64), *sol)
-    return _assemble(sol, f, wi, wo, w, model, normalization, solver)
+    return _assemble(sol, (f, wi, wo, mask, weights), model, normalization, solver)
 
 
 def _pad(a: np.ndarray, rows: int) -> np.ndarray:
@@ -308,7 +331,7 @@ def _pad(a: np.ndarray, rows: int) -> np.ndarray:
     return np.pad(a, pad)
 
 
-def _assemble(sol, f, wi, wo, w, model, normalization, solver) -> ScanlineFit:
+def _assemble(sol, data, model, normalization, solver) -> ScanlineFit:
     alpha = sol.alpha
     ax = alpha[:, 0]
     ay = alpha[:, -1]
@@ -326,7 +349,7 @@ def _assemble(sol, f, wi, wo, w, model, normalization, solver) -> ScanlineFit:
         model=model,
         normalization=normalization,
         solver=solver,
-        _data=(f, wi, wo, w),
+        _data=data,
     )
 
 
@@ -413,57 +436,73 @@ def _joint_residual(y, a: _JointArgs, iso: bool):
 
 def _combined(res: ScanlineFit, model: str, *, max_steps: int, rtol: float) -> CombinedFit:
     iso = model == "isotropic"
-    f, wi, wo, w = res._data
+    f, wi, wo, mask, weights = res._data
+    k = 1 if iso else 2
+    f_c, wi_c, wo_c, w_c = (np.asarray(a) for a in _clean_jit(
+        *(None if a is None else jnp.asarray(a) for a in (f, wi, wo, mask, weights)),
+        normalization=res.normalization, dtype=np.dtype(np.float64)))
     # Every scanline with usable data takes part, including those whose own fit
     # saw no lobe: a scanline beside the highlight says where the lobe is *not*,
     # which is exactly what constrains αx.
-    wfull = np.broadcast_to(w, f.shape)
+    wfull = np.broadcast_to(w_c, f_c.shape)
     use = np.all(np.sum(wfull > 0, axis=1) >= 3, axis=-1) & (res.status != Status.NONFINITE)
     n_use = int(np.sum(use))
-    k = 1 if iso else 2
     if n_use == 0:
         nan = WardParams(rho_d=np.full(3, np.nan), rho_s=np.nan, alpha_x=np.nan, alpha_y=np.nan)
         return CombinedFit(
             nan, nan, np.full((len(res), 3), np.nan), np.full((k + 1, k + 1), np.nan),
             float("nan"), 0, Status.INSUFFICIENT_DATA, 0, model, res.normalization,
         )
-    geom = ward_geometry(wi[use], wo[use], res.normalization)
-    args = _JointArgs(
-        jnp.asarray(f[use], jnp.float64), geom.u, geom.v, geom.g,
-        jnp.where(geom.valid[..., None], jnp.asarray(w[use], jnp.float64), 0.0),
-    )
+    # Pad the scanline axis to a power of two with zero-weight rows: one compile per bucket.
+    rows = max(8, 1 << math.ceil(math.log2(n_use)))
+    sel = [np.asarray(a)[use] for a in (f_c, wi_c, wo_c, w_c)]
+    f_p, wi_p, wo_p, w_p = (_pad(a, rows) for a in sel)
+    wi_p[n_use:, :, 2] = wo_p[n_use:, :, 2] = 1.0  # padded rows: straight up, weight 0
+    geom = ward_geometry(jnp.asarray(wi_p), jnp.asarray(wo_p), res.normalization)
+    args = _JointArgs(jnp.asarray(f_p), geom.u, geom.v, geom.g,
+                      jnp.where(geom.valid[..., None], jnp.asarray(w_p), 0.0))
     good = res.status == Status.CONVERGED
     pick = good if np.any(good) else use
     rs0 = float(np.median(res.params.rho_s[pick]))
     a0 = float(np.median(np.sqrt(res.params.alpha_x[pick] * res.params.alpha_y[pick])))
-    y0 = jnp.asarray([math.log(max(rs0, 1e-6))] + [math.log(a0)] * k, jnp.float64)
-    sol = _solve_joint(y0, args, iso, max_steps, rtol)
-    y = np.asarray(sol[0])
-    ok = bool(sol[1])
-    r = np.asarray(_joint_residual(jnp.asarray(y), args, iso))
-    chi2 = float(np.sum(r * r))
+    y = jnp.asarray([math.log(max(rs0, 1e-6))] + [math.log(a0)] * k, jnp.float64)
     n_obs = int(np.sum(np.broadcast_to(np.asarray(args.w), args.f.shape) > 0))
     dof = n_obs - (3 * n_use + 1 + k)
+    # optimistix's LM stops on small steps, which a large damping can also
+    # produce: certify the optimum with the Gauss–Newton step and restart
+    # (resetting the damping) until it is below 1e-3 σ.
+    certified = False
+    for _ in range(4):
+        y, _ = _solve_joint(y, args, iso, max_steps, rtol)
+        jac, r = _joint_jacobian(y, args, iso)
+        jac = np.asarray(jac).reshape(-1, 1 + k)
+        r = np.asarray(r).ravel()
+        jtj = jac.T @ jac
+        step = np.linalg.solve(jtj, -jac.T @ r)
+        sigma = np.sqrt(np.diag(np.linalg.inv(jtj)) * float(r @ r) / max(dof, 1))
+        if np.all(np.abs(step) <= 1e-3 * sigma + 1e-12):
+            certified = True
+            break
+        y = y + jnp.asarray(step)  # a Gauss–Newton step is the best next start
+    y = np.asarray(y)
+    chi2 = float(r @ r)
     scale = chi2 / max(dof, 1)
 
     # Profiled covariance of the shared natural parameters (ρs, α…): the
     # residual already has every ρd projected out, so JᵀJ is the Schur complement.
     nat = np.exp(y)
-    jac = np.asarray(_joint_jacobian(jnp.asarray(y), args, iso)).reshape(-1, 1 + k) / nat
-    info = jac.T @ jac
-    cov = np.linalg.inv(info) * scale
+    jac_nat = jac / nat[None, :]
+    cov = np.linalg.inv(jac_nat.T @ jac_nat) * scale
     se = np.sqrt(np.clip(np.diag(cov), 0, None))
 
     a_lin, _ = _joint_rho_d(jnp.asarray(y[0]), jnp.asarray(y[1:]), args, iso)
-    rho_d_s = np.pi * np.asarray(a_lin)
+    rho_d_s = np.pi * np.asarray(a_lin)[:n_use]
     rho_d = rho_d_s.mean(axis=0)
     # σ of the mean ρd: noise in each scanline's mean, plus (ρs, α) uncertainty
     # through ∂ρd/∂(ρs, α); the two are uncorrelated (projected residual ⟂ means).
-    wsum = np.sum(np.broadcast_to(np.asarray(args.w), args.f.shape), axis=1)  # (S, 3)
+    wsum = np.sum(np.broadcast_to(np.asarray(args.w), args.f.shape), axis=1)[:n_use]  # (S, 3)
     noise_var = (np.pi / n_use) ** 2 * np.sum(scale / np.where(wsum > 0, wsum, np.inf), axis=0)
-    grad = np.asarray(
-        jax.jacfwd(lambda yy: jnp.pi * _joint_rho_d(yy[0], yy[1:], args, iso)[0].mean(0))(jnp.asarray(y))
-    ) / nat  # (3, 1 + k) in natural units
+    grad = np.asarray(_joint_rho_d_mean_grad(jnp.asarray(y), args, iso, n_use)) / nat[None, :]
     rho_d_var = noise_var + np.einsum("ip,pq,iq->i", grad, cov, grad)
 
     rho_d_full = np.full((len(res), 3), np.nan)
@@ -471,7 +510,7 @@ def _combined(res: ScanlineFit, model: str, *, max_steps: int, rtol: float) -> C
     ax, ay = (nat[1], nat[1]) if iso else (nat[1], nat[2])
     sx, sy = (se[1], se[1]) if iso else (se[1], se[2])
     finite = np.all(np.isfinite(y)) and np.isfinite(chi2) and np.all(np.isfinite(se))
-    status = Status.CONVERGED if ok and finite else (Status.NONFINITE if not finite else Status.MAX_STEPS)
+    status = Status.NONFINITE if not finite else (Status.CONVERGED if certified else Status.MAX_STEPS)
     return CombinedFit(
         params=WardParams(rho_d=rho_d, rho_s=nat[0], alpha_x=ax, alpha_y=ay),
         stderr=WardParams(rho_d=np.sqrt(rho_d_var), rho_s=se[0], alpha_x=sx, alpha_y=sy),
@@ -487,6 +526,12 @@ def _combined(res: ScanlineFit, model: str, *, max_steps: int, rtol: float) -> C
 
 
 @eqx.filter_jit
+def _joint_rho_d_mean_grad(y, args: _JointArgs, iso: bool, n_use: int):
+    fn = lambda yy: jnp.pi * _joint_rho_d(yy[0], yy[1:], args, iso)[0][:n_use].mean(0)  # noqa: E731
+    return jax.jacfwd(fn)(y)
+
+
+@eqx.filter_jit
 def _solve_joint(y0, args: _JointArgs, iso: bool, max_steps: int, rtol: float):
     solver = optx.LevenbergMarquardt(rtol=rtol, atol=rtol * 1e-2)
     sol = optx.least_squares(
@@ -497,4 +542,5 @@ def _solve_joint(y0, args: _JointArgs, iso: bool, max_steps: int, rtol: float):
 
 @eqx.filter_jit
 def _joint_jacobian(y, args: _JointArgs, iso: bool):
-    return jax.jacfwd(lambda yy: _joint_residual(yy, args, iso))(y)
+    """Jacobian (in ``y``) and value of the profiled joint residual."""
+    return jax.jacfwd(lambda yy: _joint_residual(yy, args, iso))(y), _joint_residual(y, args, iso)
