@@ -246,11 +246,23 @@ def _clean_jit(f, wi, wo, mask, weights, *, normalization, dtype):
     return _clean(f, wi, wo, mask, weights, dtype)
 
 
+def _bucket_rows(s: int, chunk: int) -> int:
+    """Rows a batch of ``s`` is padded to: 64, 256, 1024, … (×4), at most ``chunk``.
+
+    Coarse buckets keep the number of compiled shapes small (each costs
+    seconds); the padded rows have zero weight and cost little.
+    """
+    rows = 64
+    while rows < s and rows < chunk:
+        rows *= 4
+    return min(rows, chunk)
+
+
 def _buckets(s: int, chunk: int) -> list[tuple[int, int, int]]:
-    """Split ``s`` rows into chunks of ``chunk`` rows; a short batch is padded to a power of two."""
+    """Split ``s`` rows into chunks of ``chunk`` rows; a short batch is padded to a bucket size."""
     if s >= chunk:
         return [(i, min(i + chunk, s), chunk) for i in range(0, s, chunk)]
-    return [(0, s, max(8, 1 << math.ceil(math.log2(max(s, 1)))))]
+    return [(0, s, _bucket_rows(s, chunk))]
 
 
 def fit_scanlines(
@@ -454,7 +466,7 @@ def _combined(res: ScanlineFit, model: str, *, max_steps: int, rtol: float) -> C
             float("nan"), 0, Status.INSUFFICIENT_DATA, 0, model, res.normalization,
         )
     # Pad the scanline axis to a power of two with zero-weight rows: one compile per bucket.
-    rows = max(8, 1 << math.ceil(math.log2(n_use)))
+    rows = _bucket_rows(n_use, 1 << 30)
     sel = [np.asarray(a)[use] for a in (f_c, wi_c, wo_c, w_c)]
     f_p, wi_p, wo_p, w_p = (_pad(a, rows) for a in sel)
     wi_p[n_use:, :, 2] = wo_p[n_use:, :, 2] = 1.0  # padded rows: straight up, weight 0
