@@ -97,7 +97,8 @@ BROKEN = {
     "empty_toml": (_raw(""), "capture.toml", "method: required field is missing"),
     "missing_method": (_edit(method=None), "capture.toml", "method: required field is missing"),
     "unknown_method": (_edit(method="laser"), "capture.toml", "method:"),
-    "smartphone_not_yet": (_edit(method="smartphone"), "capture.toml", "method: 'smartphone' is not yet supported"),
+    # a scanline capture relabelled: the smartphone schema wants [photo], not [images]
+    "scanline_as_smartphone": (_edit(method="smartphone"), "capture.toml", "photo: required field is missing"),
     "missing_section": (_edit(camera=None), "capture.toml", "camera: required field is missing"),
     "missing_field": (_edit(images__encoding=None), "capture.toml", "images.encoding: required field is missing"),
     "extra_field": (_edit(camera__focal=500.0), "capture.toml", "camera.focal: unknown field"),
@@ -159,7 +160,7 @@ def test_broken_capture_gives_one_clear_error(good, tmp_path, case):
 
 
 @pytest.mark.parametrize("case", ["no_capture_toml", "nan_in_lamp", "corrupt_image", "dark_size_mismatch",
-                                  "all_saturated", "all_dark", "camera_misses_probe", "smartphone_not_yet"])
+                                  "all_saturated", "all_dark", "camera_misses_probe", "scanline_as_smartphone"])
 def test_cli_reports_one_line_without_traceback(good, tmp_path, case):
     folder = _make(good, tmp_path, case)
     res = CliRunner().invoke(main, ["fit", str(folder), "--out", str(tmp_path / "out"), "--quiet"])

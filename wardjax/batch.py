@@ -50,6 +50,15 @@ def _fit_scanline(cap, out_dir: Path, created: str) -> dict:
 FITTERS["scanline"] = _fit_scanline
 
 
+def _fit_smartphone(cap, out_dir: Path, created: str) -> dict:
+    from .smartphone_capture import fit_smartphone_capture
+
+    return fit_smartphone_capture(cap, out_dir, created=created)
+
+
+FITTERS["smartphone"] = _fit_smartphone
+
+
 @dataclasses.dataclass(frozen=True)
 class BatchItem:
     """One capture of a batch: its folder, output name, and the outcome."""
@@ -125,8 +134,9 @@ def _row(item: BatchItem) -> dict:
         p, e = d["params"], d["stderr"]
         row.update(method=d["method"], model=d["model"], normalization=d["normalization"],
                    fit_status=d["fit"]["status"],
-                   reduced_chi2=_num(d["fit"]["reduced_chi2"]),
-                   valid_pixels=d["fit"]["diagnostics"]["pixels"]["valid"])
+                   # methods without a least-squares fit (smartphone) have neither
+                   reduced_chi2=_num(d["fit"].get("reduced_chi2")),
+                   valid_pixels=d["fit"].get("diagnostics", {}).get("pixels", {}).get("valid", ""))
         for src, suffix in ((p, ""), (e, "_err")):
             for i, ch in enumerate("rgb"):
                 row[f"rho_d_{ch}{suffix}"] = _num(src["rho_d"][i])

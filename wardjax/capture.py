@@ -11,7 +11,7 @@ A capture folder holds what was measured and how::
 z = 0, stripline along y, probe at x > 0, standard at x < 0, lamp and camera
 in the plane x = 0)::
 
-    method = "scanline"            # "scanline" (image-based paper); "smartphone" is reserved
+    method = "scanline"            # "scanline" (image-based paper); "smartphone": see wardjax.smartphone_capture
     name = "desk"                  # optional; default the folder name
     rho_standard = 0.99            # reflectance of the standard, or [r, g, b]
 
@@ -175,7 +175,7 @@ class FitSection(_Section):
 class CaptureFile(_Section):
     """The whole ``capture.toml`` of a ``method = "scanline"`` capture."""
 
-    method: Literal["scanline", "smartphone"]
+    method: Literal["scanline"]
     name: str | None = None
     rho_standard: Annotated[tuple[Reflectance, Reflectance, Reflectance], BeforeValidator(_scalar_to_rgb)] = (
         0.99, 0.99, 0.99)
@@ -312,11 +312,10 @@ def parse_capture_file(path: Path) -> CaptureFile:
         raise CaptureError(f, None, f"not valid TOML: {e}") from None
     method = raw.get("method")
     if method == "smartphone":
-        # ------------------------------------------------------------------ smartphone hook
-        # The smartphone method (issue: smartphone Ward BRDF) adds its own
-        # section to this schema and a fitting function; until it lands, such
-        # captures are refused here with a clear message.
-        raise CaptureError(f, "method", "'smartphone' is not yet supported by this version of wardjax")
+        # The smartphone method owns its section of the schema.
+        from .smartphone_capture import parse_smartphone_file
+
+        return parse_smartphone_file(raw, f)
     try:
         cfg = CaptureFile.model_validate(raw)
     except pydantic.ValidationError as e:
@@ -463,6 +462,10 @@ def load_capture(path) -> Capture:
     if not folder.is_dir():
         raise CaptureError(str(folder), None, "not a folder (a capture is a folder with capture.toml and images)")
     cfg = parse_capture_file(folder / CAPTURE_FILE)
+    if cfg.method == "smartphone":
+        from .smartphone_capture import load_smartphone_capture
+
+        return load_smartphone_capture(folder, cfg)
     checksums = {CAPTURE_FILE: _sha256(folder / CAPTURE_FILE)}
     lit_codes, checksums[cfg.images.lit] = _load_image(folder, cfg.images.lit, "images.lit", cfg)
     enc, bits = cfg.images.encoding, cfg.images.bit_depth

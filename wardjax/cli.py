@@ -117,7 +117,7 @@ def fit_cmd(paths: tuple[Path, ...], out_dir: Path, force: bool, quiet: bool) ->
             if it.params:
                 p, e = it.params["params"], it.params["stderr"]
                 pm = lambda k: f"{p[k]:.4f} ± {e[k]:.4f}" if p[k] is not None and e[k] is not None else "–"  # noqa: E731
-                rc = it.params["fit"]["reduced_chi2"]
+                rc = it.params["fit"].get("reduced_chi2")  # none for the smartphone method
                 t.add_row(it.name, "skipped (done)" if it.skipped else "ok", pm("rho_s"), pm("alpha_x"),
                           pm("alpha_y"), f"{rc:.3g}" if rc is not None else "–")
             else:
