@@ -56,4 +56,17 @@ from .reconstruct import MaskReason as MaskReason
 from .reconstruct import reconstruct_brdf as reconstruct_brdf
 # --- end capture pipeline
 
+# --- texture analysis and synthesis (issue 6)
+from .synthesis import SteerablePyramid as SteerablePyramid
+from .synthesis import SynthesisResult as SynthesisResult
+from .synthesis import TextureModel as TextureModel
+from .synthesis import analyze_texture as analyze_texture
+from .synthesis import build_steerable_pyramid as build_steerable_pyramid
+from .synthesis import largest_valid_rectangle as largest_valid_rectangle
+from .synthesis import match_histogram as match_histogram
+from .synthesis import periodic_smooth_decomposition as periodic_smooth_decomposition
+from .synthesis import reconstruct_steerable_pyramid as reconstruct_steerable_pyramid
+from .synthesis import synthesize_texture as synthesize_texture
+# --- end texture
+
 __version__ = "0.1.0"

@@ -163,6 +163,95 @@ def simulate_cmd(out_dir, material, rho_d, rho_s, alpha_x, alpha_y, texture, enc
 # --------------------------------------------------------------------------- end capture pipeline
 
 
+# --------------------------------------------------------------------------- texture (issue 6)
+
+
+def _parse_region(text: str | None) -> tuple[int, int, int, int] | None:
+    """``"Y0:Y1,X0:X1"`` → ``(y0, y1, x0, x1)``."""
+    if text is None:
+        return None
+    try:
+        rows, cols = text.split(",")
+        y0, y1 = (int(v) for v in rows.split(":"))
+        x0, x1 = (int(v) for v in cols.split(":"))
+    except ValueError:
+        _fail(f"--region {text!r}: expected Y0:Y1,X0:X1 (rows then columns, half-open), e.g. 0:512,100:612")
+    return y0, y1, x0, x1
+
+
+def _parse_size(text: str) -> tuple[int, int]:
+    """``"WIDTHxHEIGHT"`` → ``(height, width)``."""
+    try:
+        w, h = (int(v) for v in text.lower().split("x"))
+    except ValueError:
+        _fail(f"--size {text!r}: expected WIDTHxHEIGHT in pixels, e.g. 2048x1024")
+    if w < 1 or h < 1:
+        _fail(f"--size {text!r}: width and height must be positive")
+    return h, w
+
+
+@main.group()
+def texture() -> None:
+    """Parametric ρd texture: analyse a ρd map, synthesise any size from it (Heeger–Bergen)."""
+
+
+@texture.command("analyze")
+@click.argument("rho_d_path", metavar="RHO_D", type=click.Path(path_type=Path))
+@click.option("-o", "--out", "out_path", type=click.Path(dir_okay=False, path_type=Path), required=True,
+              help="Texture description to write: .json or .npz.")
+@click.option("--region", default=None, metavar="Y0:Y1,X0:X1",
+              help="Pixels to analyse (default: the largest rectangle of valid pixels).")
+@click.option("--height", type=int, default=None, help="Pyramid levels (default: up to 4, as the region allows).")
+@click.option("--quantiles", type=click.IntRange(2, 4097), default=129, show_default=True,
+              help="Entries per quantile table.")
+@click.option("--rho-s", type=float, default=0.0, show_default=True,
+              help="Specular reflectance; synthesis clamps ρd to [0, 1 − ρs].")
+def texture_analyze(rho_d_path: Path, out_path: Path, region: str | None, height: int | None, quantiles: int,
+                    rho_s: float) -> None:
+    """Describe the ρd texture in RHO_D (a linear .tif/.npy, NaN = no data) by its subband histograms."""
+    from .synthesis import analyze_texture, read_rho_d
+
+    try:
+        model = analyze_texture(read_rho_d(rho_d_path), region=_parse_region(region), height=height,
+                                n_quantiles=quantiles, rho_s=rho_s)
+        model.save(out_path)
+    except ValueError as e:
+        _fail(str(e).splitlines()[0])
+    console.print(f"analysed {model.describe_region()}", highlight=False, soft_wrap=True)
+    console.print(f"{model.channels} channel(s), {model.height} pyramid levels, {len(model.band_names)} subbands, "
+                  f"{model.n_quantiles} quantiles each; wrote {out_path} ({out_path.stat().st_size / 1024:.0f} KiB)",
+                  highlight=False, soft_wrap=True)
+
+
+@texture.command("synthesize")
+@click.argument("model_path", metavar="TEXTURE", type=click.Path(path_type=Path))
+@click.option("--size", required=True, metavar="WIDTHxHEIGHT", help="Output size in pixels, e.g. 2048x1024.")
+@click.option("--seed", type=int, default=0, show_default=True)
+@click.option("--iterations", type=click.IntRange(1, 100), default=5, show_default=True)
+@click.option("-o", "--out", "out_path", type=click.Path(dir_okay=False, path_type=Path), required=True,
+              help=".tif: linear float ρd; .png: 8-bit sRGB view.")
+def texture_synthesize(model_path: Path, size: str, seed: int, iterations: int, out_path: Path) -> None:
+    """Synthesise a seamlessly tiling ρd texture of any size from a TEXTURE description."""
+    from .synthesis import TextureModel, synthesize_texture, write_texture_image
+
+    shape = _parse_size(size)
+    if out_path.suffix.lower() not in (".tif", ".tiff", ".png"):
+        _fail(f"{out_path}: unknown image type {out_path.suffix!r}, expected .tif, .tiff or .png")
+    try:
+        model = TextureModel.load(model_path)
+        result = synthesize_texture(model, shape, seed=seed, iterations=iterations)
+        write_texture_image(out_path, result.image)
+    except ValueError as e:
+        _fail(str(e).splitlines()[0])
+    dist = " ".join(f"{d:.3f}" for d in result.distance)
+    console.print(f"subband KS distance: start {result.initial_distance:.3f}, per iteration {dist}", highlight=False,
+                  soft_wrap=True)
+    console.print(f"wrote {out_path} ({shape[1]}x{shape[0]}, seed {seed})", highlight=False, soft_wrap=True)
+
+
+# --------------------------------------------------------------------------- end texture
+
+
 if __name__ == "__main__":  # pragma: no cover
     main()
 

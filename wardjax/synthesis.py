@@ -328,12 +328,14 @@ def _sort_keys(keys: tuple[Array, ...], method: Literal["auto", "numpy", "xla"] 
 
 def _targets(table: Float[Array, "... q"], probs: Float[Array, "q"], n: int) -> Float[Array, "... n"]:
     """Target sorted values: the quantile function (piecewise linear through ``(probs, table)``) at ``(k + 1/2) / n``."""
+    # In float64 (callers run under jax.enable_x64): near p = 1 the quantile function
+    # is steep and a float32 probability would cost ~1e-5 relative in the tail.
     q = table.shape[-1]
-    probs = probs.astype(jnp.float32)
-    t = (jnp.arange(n, dtype=jnp.float32) + 0.5) / n
-    flat = table.reshape(-1, q).astype(jnp.float32)
+    probs = probs.astype(jnp.float64)
+    t = (jnp.arange(n, dtype=jnp.float64) + 0.5) / n
+    flat = table.reshape(-1, q).astype(jnp.float64)
     out = jax.vmap(lambda f: jnp.interp(t, probs, f))(flat)
-    return out.reshape(*table.shape[:-1], n)
+    return out.reshape(*table.shape[:-1], n).astype(jnp.float32)
 
 
 def _table_cdf(v: Float[Array, "n"], table: Float[Array, "q"], probs: Float[Array, "q"]) -> Float[Array, "n"]:
@@ -352,7 +354,7 @@ def _ks_sorted(sorted_vals: Float[Array, "... n"], table: Float[Array, "... q"],
     flat_v = sorted_vals.reshape(-1, n)
     flat_t = table.reshape(-1, table.shape[-1]).astype(sorted_vals.dtype)
     f = jax.vmap(_table_cdf, in_axes=(0, 0, None))(flat_v, flat_t, probs.astype(sorted_vals.dtype))
-    k = jnp.arange(n, dtype=f.dtype)
+    k = jnp.arange(n, dtype=f.dtype)[None, :]
     d = jnp.maximum(jnp.max(f - k / n, axis=-1), jnp.max((k + 1) / n - f, axis=-1))
     return d.reshape(sorted_vals.shape[:-1])
 
@@ -406,7 +408,7 @@ def match_histogram(values, quantiles, probabilities=None, *, axis: int = -1) ->
     ndarray float32, the shape of ``values``.
     """
     v = np.moveaxis(np.asarray(values, dtype=np.float32), axis, -1)
-    q = np.asarray(quantiles, dtype=np.float32)
+    q = np.asarray(quantiles, dtype=np.float64)
     if v.ndim == 0 or v.shape[-1] == 0:
         raise ValueError(f"values must have at least one element along axis {axis}, got shape {np.shape(values)}")
     if q.ndim == 0 or q.shape[-1] < 2:
@@ -421,7 +423,7 @@ def match_histogram(values, quantiles, probabilities=None, *, axis: int = -1) ->
     q = np.broadcast_to(q, (*v.shape[:-1], q.shape[-1]))
     with jax.enable_x64(True):
         (keys,) = _sort_keys((_pack_jit(jnp.asarray(v)),))
-        out = _match_jit(keys, jnp.asarray(q), jnp.asarray(p, jnp.float32))
+        out = _match_jit(keys, jnp.asarray(q), jnp.asarray(p))
         return np.moveaxis(np.asarray(out), -1, axis)
 
 
@@ -562,8 +564,9 @@ class TextureModel(eqx.Module):
         n_bands = 2 + ORIENTATIONS * height
 
         def array(name, shape):
+            value = field(name)
             try:
-                a = np.asarray(field(name), dtype=np.float64)
+                a = np.asarray(value, dtype=np.float64)
             except (TypeError, ValueError):
                 raise ValueError(f"{source}: field {name!r} is not an array of numbers") from None
             if a.shape != shape:
@@ -741,7 +744,7 @@ def _quantiles_from_keys(sorted_keys, probs):
         pos = probs * (n - 1.0)
         i0 = jnp.clip(jnp.floor(pos).astype(jnp.int32), 0, n - 1)
         i1 = jnp.minimum(i0 + 1, n - 1)
-        w = (pos - i0).astype(vals.dtype)
+        w = (pos - i0).astype(vals.dtype).reshape((1,) * (vals.ndim - 1) + (-1,))
         out.append(vals[..., i0] * (1 - w) + vals[..., i1] * w)
     return tuple(out)
 
@@ -1016,9 +1019,9 @@ def synthesize_texture(
         masks = _device_masks((hh, ww), model.height, "float32")
         probs = jnp.asarray(model.probabilities, jnp.float32)
         targets, tables, pix_targets = _synthesis_targets(
-            jnp.asarray(model.band_quantiles, jnp.float32),
-            jnp.asarray(model.pixel_quantiles, jnp.float32),
-            jnp.asarray(model.probabilities, jnp.float32),
+            jnp.asarray(model.band_quantiles, jnp.float64),
+            jnp.asarray(model.pixel_quantiles, jnp.float64),
+            jnp.asarray(model.probabilities, jnp.float64),
             shapes,
         )
         noise = jax.random.normal(jax.random.key(int(seed)), (c, hh, ww), jnp.float32)
@@ -1064,7 +1067,8 @@ def write_texture_image(path, image) -> Path:
     if suffix in (".tif", ".tiff"):
         import tifffile
 
-        _atomic_write(path, lambda tmp: tifffile.imwrite(tmp, img))
+        photometric = "rgb" if img.ndim == 3 and img.shape[-1] == 3 else "minisblack"
+        _atomic_write(path, lambda tmp: tifffile.imwrite(tmp, img, photometric=photometric))
     elif suffix == ".png":
         import imageio.v3 as iio
 
