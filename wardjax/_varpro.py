@@ -96,7 +96,6 @@ class Prepared(NamedTuple):
     wsum: Array  # (C,) Σ w (1 where there is none, to keep divisions finite)
     fbar: Array  # (3,) per-channel weighted mean of f
     k0: Array  # () Σ w f̃² over channels
-    mult: float  # m = 3 / C
     channels_ok: Array  # () every weight column has some weight
     has: Array  # (C,) this weight column has some weight
     m1: Array  # (2, C, P1, N)
@@ -106,6 +105,11 @@ class Prepared(NamedTuple):
     grid_x: Array  # (Ng,) t on the subsample
     grid_wsum: Array  # (C,)
     grid_fsum: Array  # (C,) Σ w f̃ on the subsample (not 0: centred on all samples)
+
+    @property
+    def mult(self) -> float:
+        """``m = 3 / C``: how many channels share one weight column."""
+        return 3.0 / self.w.shape[-2]
 
 
 GRID_MIN_SAMPLES = 64
@@ -147,7 +151,7 @@ def prepare(f, u, v, g, w, iso: bool = True) -> Prepared:
     grid_wsum = jnp.sum(w[:, sub], axis=-1)
     grid_wsum = jnp.where(grid_wsum > 0, grid_wsum, 1.0)
     grid_fsum = jnp.sum((w * ft)[:, sub], axis=-1)
-    return Prepared(u, v, w, ft, wsum, fbar, k0, 3.0 / c, channels_ok, has, m1, m2,
+    return Prepared(u, v, w, ft, wsum, fbar, k0, channels_ok, has, m1, m2,
                     grid_m1, grid_m2, (u + v)[sub], grid_wsum, grid_fsum)
 
 
@@ -388,11 +392,15 @@ def covariance(theta, st: Stats, p: Prepared, scale):
     return cov * scale
 
 
-def solve_scanline(f, wi, wo, w, *, iso: bool, rtol: float, normalization: str) -> ScanlineSolution:
-    """Fit one scanline (the function that is vmapped over a chunk)."""
+def prepare_scanline(f, wi, wo, w, *, iso: bool, normalization: str) -> Prepared:
+    """Geometry and moments of one scanline (stage A, vmapped over a chunk)."""
     geom = ward_geometry(wi, wo, normalization)
     w = jnp.where(geom.valid[:, None], w, 0.0)
-    p = prepare(f, geom.u, geom.v, geom.g, w, iso)
+    return prepare(f, geom.u, geom.v, geom.g, w, iso)
+
+
+def solve_scanline(p: Prepared, *, iso: bool, rtol: float) -> ScanlineSolution:
+    """Search and statistics of one prepared scanline (stage B, vmapped over a chunk)."""
     theta = grid_start(p)
     if iso:
         theta, st = lm(theta, p, True, ISO_STEPS, rtol)
@@ -460,9 +468,9 @@ def fit_chunk(
     rtol: float,
     normalization: str,
 ) -> ScanlineSolution:
-    """vmap of :func:`solve_scanline` over the scanlines of one chunk."""
-    fn = lambda *a: solve_scanline(*a, iso=iso, rtol=rtol, normalization=normalization)  # noqa: E731
-    return jax.vmap(fn)(f, wi, wo, w)
+    """Both stages in one traced function (for tests and tracing; slower under jit, see fit_scanlines)."""
+    p = jax.vmap(lambda *a: prepare_scanline(*a, iso=iso, normalization=normalization))(f, wi, wo, w)
+    return jax.vmap(lambda q: solve_scanline(q, iso=iso, rtol=rtol))(p)
 
 
-fit_chunk_jit = jax.jit(fit_chunk, static_argnames=("iso", "rtol", "normalization"))
+__all__ = ["ScanlineSolution", "fit_chunk", "prepare_scanline", "solve_scanline"]

@@ -235,10 +235,28 @@ def _clean(f, wi, wo, mask, weights, dtype):
     return jnp.where(finite, f, 0.0), jnp.where(dirs_ok, wi, up), jnp.where(dirs_ok, wo, up), w
 
 
-@functools.partial(jax.jit, static_argnames=("iso", "rtol", "normalization", "dtype"))
-def _fast_chunk(f, wi, wo, mask, weights, *, iso, rtol, normalization, dtype):
+# The fast path is compiled as two stages. Stage A cleans the inputs and builds
+# each scanline's geometry and moment matrices; stage B runs the search on
+# them. Compiled as one program, XLA:CPU lays out and fuses the moments so
+# that every evaluation of the search costs ~5× more (measured: 1.5 vs 6–10 ms
+# CPU per evaluation of 1,024 scanlines); materialising them between two
+# programs keeps each evaluation a plain exp plus two small mat-vecs.
+
+
+@functools.partial(jax.jit, static_argnames=("iso", "normalization", "dtype"))
+def _prepare_chunk(f, wi, wo, mask, weights, *, iso, normalization, dtype):
     f, wi, wo, w = _clean(f, wi, wo, mask, weights, dtype)
-    return _varpro.fit_chunk(f, wi, wo, w, iso=iso, rtol=rtol, normalization=normalization)
+    return jax.vmap(lambda *a: _varpro.prepare_scanline(*a, iso=iso, normalization=normalization))(f, wi, wo, w)
+
+
+@functools.partial(jax.jit, static_argnames=("iso", "rtol"))
+def _search_chunk(prepared, *, iso, rtol):
+    return jax.vmap(lambda p: _varpro.solve_scanline(p, iso=iso, rtol=rtol))(prepared)
+
+
+def _fast_chunk(f, wi, wo, mask, weights, *, iso, rtol, normalization, dtype):
+    prepared = _prepare_chunk(f, wi, wo, mask, weights, iso=iso, normalization=normalization, dtype=dtype)
+    return _search_chunk(prepared, iso=iso, rtol=rtol)
 
 
 @functools.partial(jax.jit, static_argnames=("normalization", "dtype"))
@@ -325,7 +343,7 @@ def fit_scanlines(
     with jax.enable_x64(True):
         pieces = []
         for start, stop, rows in _buckets(s, chunk):
-            args = [None if a is None else jnp.asarray(_pad(a[start:stop], rows)) for a in (f, wi, wo, mask, weights)]
+            args = [None if a is None else jax.device_put(_pad(a[start:stop], rows)) for a in (f, wi, wo, mask, weights)]
             if solver == "fast":
                 out = _fast_chunk(*args, iso=iso, rtol=rtol, normalization=normalization, dtype=dtype)
             else:
