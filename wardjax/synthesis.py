@@ -298,14 +298,14 @@ def _unpack(keys: Array) -> tuple[Array, Array]:
 
 
 def _sort_host(keys: list[np.ndarray]) -> list[np.ndarray]:
-    """Sort every row (last axis) of every array with NumPy, rows spread over threads (NumPy releases the GIL)."""
+    """Sort every row (last axis) of every array in place with NumPy, rows spread over threads (NumPy releases the GIL)."""
     rows = [(i, j) for i, k in enumerate(keys) for j in range(math.prod(k.shape[:-1]))]
     flat = [k.reshape(-1, k.shape[-1]) for k in keys]
-    out = [np.empty_like(f) for f in flat]
+    out = flat
 
     def one(ij):
         i, j = ij
-        out[i][j] = np.sort(flat[i][j])
+        flat[i][j].sort()
 
     workers = min(len(rows), os.cpu_count() or 1)
     if workers <= 1:
@@ -323,7 +323,7 @@ _sort_device = jax.jit(lambda keys: tuple(jnp.sort(k, axis=-1) for k in keys))
 def _sort_keys(keys: tuple[Array, ...], method: Literal["auto", "numpy", "xla"] = "auto") -> tuple[Array, ...]:
     if method == "xla" or (method == "auto" and jax.default_backend() != "cpu"):
         return _sort_device(tuple(keys))
-    return tuple(jnp.asarray(k) for k in _sort_host([np.asarray(k) for k in keys]))
+    return tuple(jnp.asarray(k) for k in _sort_host([np.array(k) for k in keys]))
 
 
 def _targets(table: Float[Array, "... q"], probs: Float[Array, "q"], n: int) -> Float[Array, "... n"]:
@@ -339,23 +339,41 @@ def _targets(table: Float[Array, "... q"], probs: Float[Array, "q"], n: int) -> 
 
 
 def _table_cdf(v: Float[Array, "n"], table: Float[Array, "q"], probs: Float[Array, "q"]) -> Float[Array, "n"]:
-    """CDF of the distribution whose quantile function interpolates ``(probs, table)`` linearly (ties allowed)."""
-    q = table.shape[-1]
-    i = jnp.clip(jnp.searchsorted(table, v, side="right"), 1, q - 1)
+    """CDF at *sorted* ``v`` of the distribution whose quantile function interpolates ``(probs, table)`` linearly.
+
+    Ties in ``table`` are allowed. The knot index ``i(j) = #{k: table_k ≤ v_j}`` is
+    found by locating the ``q`` knots in the sorted sample and accumulating, O(n + q log n)
+    instead of ``n`` binary searches (which XLA's CPU backend runs slowly).
+    """
+    q, n = table.shape[-1], v.shape[-1]
+    pos = jnp.searchsorted(v, table, side="left")  # first j with v_j >= table_k
+    i = jnp.cumsum(jnp.zeros(n + 1, jnp.int32).at[pos].add(1))[:n]
+    i = jnp.clip(i, 1, q - 1)
     lo, hi = table[i - 1], table[i]
     frac = jnp.where(hi > lo, (v - lo) / jnp.where(hi > lo, hi - lo, 1.0), 1.0)
     f = probs[i - 1] + jnp.clip(frac, 0.0, 1.0) * (probs[i] - probs[i - 1])
     return jnp.where(v < table[0], 0.0, jnp.where(v >= table[-1], 1.0, f))
 
 
+_KS_POINTS = 8192
+
+
 def _ks_sorted(sorted_vals: Float[Array, "... n"], table: Float[Array, "... q"], probs) -> Float[Array, "..."]:
-    """One-sample KS statistic of sorted samples against a quantile table, ``max_k |F(v_k) − ECDF|``."""
-    n = sorted_vals.shape[-1]
-    flat_v = sorted_vals.reshape(-1, n)
+    """One-sample KS statistic of sorted samples against a quantile table, ``max_k |F(v_k) − ECDF|``.
+
+    Evaluated at every ``s``-th order statistic, ``s = max(1, n // 8192)``: since
+    both F and the ECDF are nondecreasing this is within ``s / n ≤ 1/8192`` below
+    the exact statistic (exact for ``n < 16384``), at a fraction of the cost.
+    """
+    n_all = sorted_vals.shape[-1]
+    stride = max(1, n_all // _KS_POINTS)
+    sub = sorted_vals[..., ::stride]
+    n = sub.shape[-1]
+    flat_v = sub.reshape(-1, n)
     flat_t = table.reshape(-1, table.shape[-1]).astype(sorted_vals.dtype)
     f = jax.vmap(_table_cdf, in_axes=(0, 0, None))(flat_v, flat_t, probs.astype(sorted_vals.dtype))
-    k = jnp.arange(n, dtype=f.dtype)[None, :]
-    d = jnp.maximum(jnp.max(f - k / n, axis=-1), jnp.max((k + 1) / n - f, axis=-1))
+    k = (jnp.arange(n, dtype=f.dtype) * stride)[None, :]
+    d = jnp.maximum(jnp.max(f - k / n_all, axis=-1), jnp.max((k + 1) / n_all - f, axis=-1))
     return d.reshape(sorted_vals.shape[:-1])
 
 
