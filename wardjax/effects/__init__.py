@@ -1,0 +1,25 @@
+"""Missing-effect discovery: find where model and data disagree, name the effect, add it.
+
+An :class:`Effect` is a named, documented extension of a forward model (extra
+parameters with an absent value, the forward change, the residual signature).
+:func:`discover` fits a baseline, measures the gap (reduced χ²), fits every
+candidate extension, adds the one the evidence (BIC and a boundary-corrected
+likelihood ratio) justifies, repeats, and reports what remains unexplained.
+See "Missing effects" in DESIGN.md.
+"""
+
+from ._discover import discover as discover
+from ._effect import Effect as Effect
+from ._effect import Param as Param
+from ._library import LIBRARY as LIBRARY
+from ._library import get_effect as get_effect
+from ._library import library as library
+from ._models import ScanlineData as ScanlineData
+from ._models import ScanlineModel as ScanlineModel
+from ._models import ThresholdData as ThresholdData
+from ._models import ThresholdModel as ThresholdModel
+from ._models import scanline_data as scanline_data
+from ._models import threshold_data as threshold_data
+from ._report import Candidate as Candidate
+from ._report import DiscoveryReport as DiscoveryReport
+from ._report import Step as Step

@@ -1,0 +1,410 @@
+"""The models :func:`~wardjax.effects.discover` can extend, and the data they take.
+
+A model exposes what ``discover`` needs (see "Missing effects" in DESIGN.md):
+its own parameters (:meth:`base_params`), whitened residuals for given
+parameter values and a set of active effects (:meth:`residuals`, a pure JAX
+function), predictions (:meth:`predict`), and named covariates per
+observation (:meth:`covariates`) against which residual structure is tested.
+Effects extend a model through the hooks it calls (:class:`Effect` methods).
+
+Scanline model
+    BRDF samples ``f_r`` on ``S`` scanlines × ``N`` samples × ``C`` channels
+    (reconstructed ``v/v_std`` values of the image-based rig, or measured
+    BRDFs such as CUReT's). Prediction, with every effect at its absent value
+    the isotropic Ward model of the papers (image-based paper, eq. for
+    ``f_r,Ward``; :func:`wardjax.ward_brdf`)::
+
+        f = ρd[s, c]/π + ρs · q_c · F(θd) · S(h; αx, αy, φ) + Σ extra terms
+        f_meas = M(f)            # measurement effects, in order
+
+    ``ρd`` per scanline and channel is *profiled*: the observations are mapped
+    back through the (monotone) measurement chain, ``y' = M⁻¹(y)`` with
+    ``σ' = σ |dM⁻¹/dy|`` (delta method, exact to first order in ``σ/y``), where
+    ρd is linear and solved in closed form (a weighted mean) for every trial
+    of the other parameters. The residual is ``(y' − f)/σ'``; observations a
+    saturation effect declares censored contribute ``−2 log Φ((f − y')/σ')``
+    instead (the censored likelihood) and are left out of the ρd mean.
+
+Threshold model
+    Table 1 of the smartphone paper: lobe SD against threshold PPB, one line
+    for all lightnesses, ``SD = a + b · PPB`` (paper section 6, Fig. 8a), with
+    effects changing the slope (contrast gloss) or adding terms.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jax.scipy.special import log_ndtr
+
+from ..ward import NORMALIZATIONS, ward_geometry
+from ._effect import Param
+
+__all__ = ["ScanlineData", "ScanlineModel", "ThresholdData", "ThresholdModel", "scanline_data", "threshold_data"]
+
+_TINY = 1e-30
+LENGTH_SCALE_MM = 100.0
+
+
+# ============================================================================ data
+
+
+class ScanlineData(eqx.Module):
+    """Observations for the scanline model (build with :func:`scanline_data`).
+
+    Attributes
+    ----------
+    y, sigma
+        ``(S, N, C)`` observed BRDF values (sr⁻¹) and their noise SD.
+    mask
+        ``(S, N, C)`` bool, the observation is used.
+    wi, wo
+        ``(S, N, 3)`` unit directions to light and camera, material frame.
+    cov
+        Extra covariates, ``(S, N)`` each: ``x``, ``y`` (mm; ``x`` across the
+        stripline), ``inv_irradiance`` (lamp ``r²/cos θi``, mean 1).
+    kind
+        ``"ratio"`` (reconstructed ``v/v_std``: effects symmetric about the
+        stripline cancel) or ``"brdf"`` (calibrated BRDF values).
+    f_std
+        ``ρ_std/π`` of the reflectance standard (the ratio's reference level).
+    """
+
+    y: np.ndarray
+    sigma: np.ndarray
+    mask: np.ndarray
+    wi: np.ndarray
+    wo: np.ndarray
+    cov: dict
+    kind: str = eqx.field(static=True, default="ratio")
+    f_std: float = eqx.field(static=True, default=0.99 / np.pi)
+    available: tuple = eqx.field(static=True, default=())
+
+    @property
+    def shape(self) -> tuple[int, int, int]:
+        return tuple(self.y.shape)
+
+    @property
+    def n_obs(self) -> int:
+        return int(np.sum(np.asarray(self.mask)))
+
+
+def scanline_data(
+    f_r,
+    wi,
+    wo,
+    sigma,
+    *,
+    mask=None,
+    points=None,
+    lamp=None,
+    kind: str = "ratio",
+    rho_standard: float = 0.99,
+) -> ScanlineData:
+    """Build :class:`ScanlineData` from arrays, checking shapes at the boundary.
+
+    Parameters
+    ----------
+    f_r
+        ``(S, N, C)`` BRDF values (``(S, N)`` is taken as ``C = 1``); NaN marks missing.
+    wi, wo
+        ``(S, N, 3)`` unit directions (material frame, pointing away from the surface).
+    sigma
+        Noise SD, broadcastable to ``f_r``.
+    mask
+        Optional ``(S, N)`` or ``(S, N, C)`` bool of usable values.
+    points
+        Optional ``(S, N, 3)`` sample positions (mm; x across the stripline):
+        gives the covariates ``x``, ``y``.
+    lamp
+        Optional lamp position(s) (mm), ``(3,)`` or ``(S, 3)``: gives
+        ``inv_irradiance = r²/cos θi`` normalised to mean 1.
+    kind
+        ``"ratio"`` or ``"brdf"`` (see :class:`ScanlineData`).
+    rho_standard
+        Reflectance of the standard (the paper's BaSO₄, ≈ 0.99).
+    """
+    f = np.asarray(f_r, np.float64)
+    if f.ndim == 2:
+        f = f[..., None]
+    if f.ndim != 3:
+        raise ValueError(f"f_r must have shape (S, N, C) or (S, N), got {np.shape(f_r)}")
+    s, n, c = f.shape
+    wi = np.asarray(wi, np.float64)
+    wo = np.asarray(wo, np.float64)
+    for name, w in (("wi", wi), ("wo", wo)):
+        if w.shape != (s, n, 3):
+            raise ValueError(f"{name} must have shape {(s, n, 3)} to match f_r, got {w.shape}")
+    sig = np.broadcast_to(np.asarray(sigma, np.float64) if np.ndim(sigma) != 2 else np.asarray(sigma)[..., None],
+                          f.shape).copy()
+    if kind not in ("ratio", "brdf"):
+        raise ValueError(f"kind must be 'ratio' or 'brdf', got {kind!r}")
+    m = np.isfinite(f) & np.isfinite(sig) & (sig > 0)
+    m &= (wi[..., 2:3] > 1e-6) & (wo[..., 2:3] > 1e-6)
+    if mask is not None:
+        mk = np.asarray(mask, bool)
+        m &= mk[..., None] if mk.ndim == 2 else mk
+    if not m.any():
+        raise ValueError("no usable observation: every value is masked, non-finite, or has sigma <= 0")
+    cov = {}
+    if points is not None:
+        pts = np.asarray(points, np.float64)
+        if pts.shape != (s, n, 3):
+            raise ValueError(f"points must have shape {(s, n, 3)}, got {pts.shape}")
+        cov["x"] = pts[..., 0]
+        cov["y"] = pts[..., 1]
+        if lamp is not None:
+            lp = np.asarray(lamp, np.float64)
+            lp = lp[:, None, :] if lp.ndim == 2 else lp[None, None, :]
+            r2 = np.sum((lp - pts) ** 2, axis=-1)
+            w = r2 / np.maximum(wi[..., 2], 1e-6)
+            any_m = m.any(-1)
+            cov["inv_irradiance"] = w / np.mean(w[any_m])
+    f = np.where(m, f, 0.0)
+    sig = np.where(m, sig, 1.0)
+    avail = tuple(sorted(cov)) + (("rgb",) if c == 3 else ())
+    # NumPy float64 leaves: they become float64 JAX arrays inside the fits' scoped x64
+    return ScanlineData(y=f, sigma=sig, mask=m, wi=wi, wo=wo, cov=cov, kind=kind,
+                        f_std=float(rho_standard) / np.pi, available=avail)
+
+
+class ThresholdData(eqx.Module):
+    """Threshold observations: lobe SD (degrees) against threshold PPB, per surface.
+
+    Attributes
+    ----------
+    ppb, sd, sigma
+        ``(n,)`` threshold pixels per bar, measured lobe SD and its noise SD.
+    rho_d
+        ``(n,)`` diffuse reflectance of each surface (the contrast-gloss covariate).
+    group
+        ``(n,)`` int lightness group (for the plots).
+    """
+
+    ppb: np.ndarray
+    sd: np.ndarray
+    sigma: np.ndarray
+    rho_d: np.ndarray
+    group: np.ndarray
+    labels: tuple = eqx.field(static=True, default=())
+    kind: str = eqx.field(static=True, default="threshold")
+    available: tuple = eqx.field(static=True, default=("rho_d",))
+
+    @property
+    def n_obs(self) -> int:
+        return int(self.sd.shape[0])
+
+
+def threshold_data(ppb, sd, sigma, rho_d, group=None, labels=()) -> ThresholdData:
+    """Build :class:`ThresholdData`, checking shapes and values at the boundary."""
+    arrs = [np.asarray(a, np.float64).ravel() for a in (ppb, sd, sigma, rho_d)]
+    n = arrs[0].size
+    for name, a in zip(("ppb", "sd", "sigma", "rho_d"), arrs):
+        if a.size != n:
+            raise ValueError(f"{name} has {a.size} values, ppb has {n}")
+        if not np.all(np.isfinite(a)):
+            raise ValueError(f"{name} holds non-finite values")
+    if np.any(arrs[2] <= 0):
+        raise ValueError("sigma must be > 0")
+    g = np.zeros(n, np.int32) if group is None else np.asarray(group, np.int32).ravel()
+    return ThresholdData(*arrs, group=g, labels=tuple(labels))
+
+
+# ============================================================================ scanline model
+
+
+def _lobe(ctx, ax, ay, phi):
+    """Ward specular lobe per unit ρs with the tangent frame turned by φ about the normal."""
+    c, s = jnp.cos(phi), jnp.sin(phi)
+    hx = c * ctx["hx"] + s * ctx["hy"]
+    hy = -s * ctx["hx"] + c * ctx["hy"]
+    e = (hx * hx / (ax * ax) + hy * hy / (ay * ay)) / ctx["hz2"]
+    return ctx["g"] * jnp.exp(-e) / (ax * ay)
+
+
+@dataclasses.dataclass(frozen=True)
+class ScanlineModel:
+    """Isotropic Ward on scanlines with ρd per scanline and channel (see module docstring).
+
+    Parameters
+    ----------
+    normalization
+        Ward normalisation (:data:`wardjax.NORMALIZATIONS`).
+    """
+
+    normalization: str = "ward1992"
+    kind = "scanline"
+    title = "isotropic Ward, ρd per scanline and channel, shared ρs and α"
+
+    def __post_init__(self):
+        if self.normalization not in NORMALIZATIONS:
+            raise ValueError(f"normalization={self.normalization!r} is not one of {NORMALIZATIONS}")
+
+    def base_params(self, data: ScanlineData) -> tuple[Param, ...]:
+        y = np.asarray(data.y)
+        m = np.asarray(data.mask)
+        peak = float(np.max(np.where(m, y, -np.inf)) - np.median(y[m]))
+        return (
+            Param("rho_s", max(peak * 4 * np.pi * 0.1**2, 1e-3), kind="log", scale=0.05, unit="",
+                  doc="specular reflectance", starts=()),
+            Param("alpha", 0.1, kind="log", scale=0.1, starts=(0.03, 0.3), doc="lobe width (RMS slope)"),
+        )
+
+    def n_profiled(self, data: ScanlineData) -> int:
+        return int(np.sum(np.asarray(data.mask).any(axis=1)))
+
+    # ---------------------------------------------------------------- forward
+    def context(self, data: ScanlineData) -> dict:
+        """Geometry that does not change during a fit, computed once."""
+        wi, wo = data.wi, data.wo
+        geom = ward_geometry(wi, wo, self.normalization)
+        h = wi + wo
+        hz = jnp.where(geom.valid, h[..., 2], 1.0)
+        hn = jnp.sqrt(jnp.sum(h * h, axis=-1))
+        ctx = {
+            "hx": h[..., 0], "hy": h[..., 1], "hz2": hz * hz, "g": geom.g, "valid": geom.valid,
+            "cos_d": jnp.clip(jnp.sum(h * wi, axis=-1) / hn, 0.0, 1.0),
+            "psi": jnp.arccos(jnp.clip(jnp.sum(wi * wo, axis=-1), -1.0 + 1e-12, 1.0 - 1e-12)),
+            "f_std": data.f_std,
+        }
+        ctx.update(data.cov)
+        return ctx
+
+    def _parts(self, vals, effects, data, ctx):
+        """The Ward terms without ρd: ``(S, N, C)`` specular plus extra terms."""
+        base = vals["model"]
+        ax = ay = base["alpha"]
+        phi = 0.0
+        for e in effects:
+            ax, ay, phi = e.lobe(vals[e.name], ax, ay, phi)
+        spec = _lobe(ctx, ax, ay, phi)
+        for e in effects:
+            spec = spec * e.spec_factor(vals[e.name], ctx)
+        c = data.y.shape[-1]
+        rs = base["rho_s"] * jnp.ones((c,))
+        for e in effects:
+            rs = rs * e.rho_s_factor(vals[e.name], c)
+        term = rs[None, None, :] * spec[..., None]
+        for e in effects:
+            term = term + e.extra(vals[e.name], ctx, base, ax, ay, phi)
+        return jnp.where(ctx["valid"][..., None], term, 0.0)
+
+    def _unmeasure(self, vals, effects, data, ctx):
+        """Observations mapped back through the measurement effects: ``y'`` and ``σ' = σ |dy'/dy|``.
+
+        The measurement chain ``f_meas = M(f)`` is monotone; comparing ``M⁻¹(y)``
+        with ``f`` under the propagated noise (delta method, exact to first order
+        in ``σ/y``) keeps ρd linear, so it is profiled in closed form.
+        """
+        y, d = data.y, jnp.ones_like(data.y)
+        for e in reversed(effects):
+            y, dd = e.unmeasure(vals[e.name], y, ctx)
+            d = d * dd
+        return y, data.sigma * jnp.abs(d)
+
+    def _profile(self, vals, active, effects, data, ctx):
+        """Profiled ρd per scanline and channel, whitened residuals, prediction."""
+        term = self._parts(vals, effects, data, ctx)
+        yp, sp = self._unmeasure(vals, effects, data, ctx)
+        cens = jnp.zeros(data.y.shape, bool)
+        censoring = any(getattr(e, "censors", False) for e in effects)
+        if censoring:
+            for e in effects:
+                cens = cens | e.censored(active[e.name], data)
+        # ρd from the uncensored values (a censored value only bounds it)
+        w = jnp.where(data.mask & ~cens, 1.0 / (sp * sp), 0.0)
+        sw = jnp.sum(w, axis=1, keepdims=True)
+        rho = jnp.pi * jnp.sum(w * (yp - term), axis=1, keepdims=True) / jnp.maximum(sw, _TINY)
+        f = rho / jnp.pi + term
+        z = (yp - f) / sp
+        if censoring:
+            # a censored value says only "true value ≥ y": P = Φ((f − y')/σ')
+            t = jnp.where(cens, -z, 0.0)
+            rc = jnp.sqrt(jnp.maximum(-2.0 * log_ndtr(t), 0.0) + 1e-12)
+            z = jnp.where(cens, rc, z)
+        r = jnp.where(data.mask, z, 0.0)
+        return r, f, rho, cens
+
+    def residuals(self, vals, active, effects, data, ctx=None):
+        ctx = self.context(data) if ctx is None else ctx
+        r, *_ = self._profile(vals, active, effects, data, ctx)
+        return r.reshape(-1)
+
+    def predict(self, vals, active, effects, data):
+        """Prediction of the measured values ``(S, N, C)``, profiled ρd ``(S, 1, C)``, censored mask."""
+        ctx = self.context(data)
+        r, f, rho, cens = self._profile(vals, active, effects, data, ctx)
+        for e in effects:
+            f = e.measure(vals[e.name], f, ctx)
+        return f, rho, cens
+
+    # ---------------------------------------------------------------- covariates
+    def covariates(self, data: ScanlineData, pred: np.ndarray) -> dict[str, np.ndarray]:
+        """Named covariates per observation ``(S, N, C)`` (NumPy), for structure tests and plots."""
+        wi, wo = np.asarray(data.wi), np.asarray(data.wo)
+        s, n, c = data.y.shape
+        h = wi + wo
+        hn = np.linalg.norm(h, axis=-1)
+        hz = np.maximum(h[..., 2], 1e-12)
+        out = {
+            "theta_h": np.degrees(np.arctan2(np.hypot(h[..., 0], h[..., 1]), hz)),
+            "half_azimuth": np.degrees(np.arctan2(h[..., 1], h[..., 0])),
+            "theta_d": np.degrees(np.arccos(np.clip(np.sum(h * wi, -1) / hn, -1, 1))),
+            "psi": np.degrees(np.arccos(np.clip(np.sum(wi * wo, -1), -1, 1))),
+            "theta_i": np.degrees(np.arccos(np.clip(wi[..., 2], -1, 1))),
+            "theta_o": np.degrees(np.arccos(np.clip(wo[..., 2], -1, 1))),
+            "scanline": np.broadcast_to(np.arange(s, dtype=float)[:, None], (s, n)),
+        }
+        for k, v in data.cov.items():
+            out[k] = np.asarray(v)
+        out = {k: np.broadcast_to(v[..., None], (s, n, c)) for k, v in out.items()}
+        p = np.asarray(pred)
+        out["log_f"] = np.log(np.maximum(p, 1e-12) / data.f_std)
+        if c > 1:
+            out["channel"] = np.broadcast_to(np.arange(c, dtype=float), (s, n, c))
+        return out
+
+
+# ============================================================================ threshold model
+
+
+@dataclasses.dataclass(frozen=True)
+class ThresholdModel:
+    """One straight line ``SD = a + b · PPB`` for every lightness (paper section 6, Fig. 8a)."""
+
+    kind = "threshold"
+    title = "one PPB → lobe-SD line for all lightnesses"
+
+    def base_params(self, data: ThresholdData) -> tuple[Param, ...]:
+        x, y, s = (np.asarray(a) for a in (data.ppb, data.sd, data.sigma))
+        X = np.stack([np.ones_like(x), x], -1) / s[:, None]
+        a, b = np.linalg.lstsq(X, y / s, rcond=None)[0]
+        return (Param("a", float(a), scale=0.1, unit="deg", doc="intercept"),
+                Param("b", float(b), scale=0.1, unit="deg/PPB", doc="slope"))
+
+    def n_profiled(self, data) -> int:
+        return 0
+
+    def _pred(self, vals, effects, data):
+        base = vals["model"]
+        slope = base["b"] * jnp.ones_like(data.ppb)
+        for e in effects:
+            slope = slope * e.slope_factor(vals[e.name], data)
+        f = base["a"] + slope * data.ppb
+        for e in effects:
+            f = f + e.offset(vals[e.name], data)
+        return f
+
+    def residuals(self, vals, active, effects, data, ctx=None):
+        return (data.sd - self._pred(vals, effects, data)) / data.sigma
+
+    def predict(self, vals, active, effects, data):
+        return self._pred(vals, effects, data), None, jnp.zeros(data.sd.shape, bool)
+
+    def covariates(self, data: ThresholdData, pred) -> dict[str, np.ndarray]:
+        ppb, rd = np.asarray(data.ppb), np.asarray(data.rho_d)
+        return {"ppb": ppb, "rho_d": rd, "rho_d_x_ppb": (rd - rd.mean()) * ppb, "predicted_sd": np.asarray(pred)}

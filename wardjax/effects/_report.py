@@ -1,0 +1,376 @@
+"""The discovery report: steps, evidence, gap per step, plots; JSON, Markdown and HTML.
+
+The same :class:`DiscoveryReport` prints in a terminal (``str``), renders in a
+notebook (``_repr_html_`` / ``_repr_markdown_``) and is written to a folder by
+:meth:`DiscoveryReport.save` (``report.json``, ``report.md``, PNGs) — what
+``wardjax diagnose`` writes.
+"""
+
+from __future__ import annotations
+
+import base64
+import dataclasses
+import io
+import json
+import math
+import os
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+__all__ = ["Candidate", "DiscoveryReport", "FitState", "Step"]
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class FitState:
+    """One fitted model: parameter vector, χ², dof, gap, covariance, values ± σ, active effects."""
+
+    u: np.ndarray
+    chi2: float
+    dof: int
+    gap: float
+    ok: bool
+    cov: np.ndarray
+    active: tuple[int, ...]
+    values: dict
+    sigma: dict
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class Candidate:
+    """One candidate extension at one step.
+
+    Attributes
+    ----------
+    effect, k
+        Effect name; parameters counted in the evidence.
+    delta_chi2
+        Deviance drop against the current model (0 if only unphysical fits).
+    delta_bic
+        ``Δχ² − k ln N``: positive favours the extension.
+    p_value
+        Likelihood-ratio p-value (boundary-corrected for one-sided amplitudes).
+    explained
+        Fraction of the current excess ``χ² − dof`` it removes.
+    structure_p
+        Binned-residual test against the effect's telling covariate, before fitting.
+    physical
+        Some start converged on the physical side.
+    """
+
+    effect: str
+    k: int
+    delta_chi2: float
+    delta_bic: float
+    p_value: float
+    explained: float
+    structure_p: float
+    physical: bool
+    state: FitState | None = None
+
+    def as_dict(self) -> dict:
+        return {k: _num(getattr(self, k)) for k in
+                ("effect", "k", "delta_chi2", "delta_bic", "p_value", "explained", "structure_p", "physical")}
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class Step:
+    """One effect added: its fitted parameters ± σ, the evidence, the gap before → after, plot data."""
+
+    effect: str
+    title: str
+    side: str
+    params: dict
+    stderr: dict
+    evidence: Candidate
+    candidates: list
+    gap_before: float
+    gap_after: float
+    plot: dict | None = None
+
+
+def _num(x):
+    if isinstance(x, (bool, np.bool_)):
+        return bool(x)
+    if isinstance(x, (int, np.integer)):
+        return int(x)
+    if isinstance(x, (float, np.floating)):
+        x = float(x)
+        return x if math.isfinite(x) else None
+    return x
+
+
+def _fmt(v: float, s: float) -> str:
+    if s is None or not np.isfinite(s) or s == 0:
+        return f"{v:.4g}"
+    return f"{v:.4g} ± {s:.2g}"
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class DiscoveryReport:
+    """What :func:`~wardjax.effects.discover` found.
+
+    Attributes
+    ----------
+    found
+        Names of the effects added, in order.
+    gap
+        Reduced χ² after each step, starting with the baseline.
+    steps
+        One :class:`Step` per effect added.
+    unexplained
+        Sentences describing structure left that no library effect explains
+        (empty when the residuals are consistent with the noise).
+    structure
+        Final binned-residual test per covariate.
+    not_detectable
+        ``(name, reason)`` for effects that cancel by the rig's symmetry.
+    not_testable
+        ``(name, reason)`` for effects the data cannot test (missing covariates).
+    partial
+        Effects strongly supported but explaining too little to be named.
+    baseline, final
+        The fitted baseline and final models (:class:`FitState`).
+    """
+
+    model: str
+    model_kind: str
+    n_obs: int
+    n_profiled: int
+    baseline: FitState
+    final: FitState
+    found: list
+    gap: list
+    steps: list
+    unexplained: list
+    structure: dict
+    not_detectable: list
+    not_testable: list
+    partial: list
+    tested: list
+    seconds: float
+    settings: dict
+
+    # ---------------------------------------------------------------- summaries
+    @property
+    def explained(self) -> bool:
+        """True when no unexplained structure remains."""
+        return not self.unexplained
+
+    def verdict(self) -> str:
+        if self.found and self.explained:
+            return f"found {', '.join(self.found)}; the residuals are now consistent with the noise"
+        if self.found:
+            return (f"found {', '.join(self.found)}, but structure remains that no library effect explains")
+        if self.explained:
+            return "nothing missing: the baseline explains the data to the noise level"
+        return "unexplained discrepancy: no library effect explains it"
+
+    def to_dict(self) -> dict:
+        """JSON-ready summary (what ``report.json`` holds)."""
+        return {
+            "model": self.model,
+            "n_obs": self.n_obs,
+            "found": list(self.found),
+            "gap": [_num(g) for g in self.gap],
+            "verdict": self.verdict(),
+            "baseline": {"params": self.baseline.values.get("model", {}),
+                         "stderr": {k: _num(v) for k, v in self.baseline.sigma.get("model", {}).items()},
+                         "chi2": _num(self.baseline.chi2), "dof": self.baseline.dof},
+            "steps": [{
+                "effect": s.effect, "title": s.title, "side": s.side,
+                "params": {k: _num(v) for k, v in s.params.items()},
+                "stderr": {k: _num(v) for k, v in s.stderr.items()},
+                "evidence": s.evidence.as_dict(), "gap_before": _num(s.gap_before), "gap_after": _num(s.gap_after),
+                "candidates": [c.as_dict() for c in s.candidates],
+            } for s in self.steps],
+            "final": {"params": {k: {n: _num(v) for n, v in d.items()} for k, d in self.final.values.items()
+                                 if k == "model" or k in self.found},
+                      "chi2": _num(self.final.chi2), "dof": self.final.dof},
+            "unexplained": list(self.unexplained),
+            "partial": list(self.partial),
+            "not_detectable": [{"effect": n, "reason": w} for n, w in self.not_detectable],
+            "not_testable": [{"effect": n, "reason": w} for n, w in self.not_testable],
+            "tested": list(self.tested),
+            "settings": self.settings,
+            "seconds": _num(self.seconds),
+        }
+
+    def to_markdown(self, figures: dict[str, str] | None = None) -> str:
+        """A readable report; ``figures`` maps ``"gap"`` / effect names to image links."""
+        figures = figures or {}
+        L = [f"# Missing-effect discovery\n", f"**Model:** {self.model} — {self.n_obs} observations "
+             f"({self.n_profiled} profiled ρd).\n", f"**Verdict:** {self.verdict()}.\n"]
+        L.append("## Gap per step\n")
+        L.append("| step | model | gap (χ²/dof) |\n|---|---|---|")
+        L.append(f"| 0 | baseline | {self.gap[0]:.3f} |")
+        for i, s in enumerate(self.steps, 1):
+            L.append(f"| {i} | + {s.effect} | {self.gap[i]:.3f} |")
+        if "gap" in figures:
+            L.append(f"\n![gap per step]({figures['gap']})\n")
+        bp = self.baseline.values.get("model", {})
+        bs = self.baseline.sigma.get("model", {})
+        L.append("\n## Baseline\n")
+        L.append(", ".join(f"{k} = {_fmt(v, bs.get(k))}" for k, v in bp.items()) + "\n")
+        for i, s in enumerate(self.steps, 1):
+            ev = s.evidence
+            L.append(f"## Step {i}: {s.effect} — {s.title}\n")
+            L.append("Parameters: " + ", ".join(f"{k} = {_fmt(v, s.stderr.get(k))}" for k, v in s.params.items())
+                     + "\n")
+            L.append(f"Evidence: Δχ² = {ev.delta_chi2:.1f}, ΔBIC = {ev.delta_bic:.1f} (k = {ev.k}), "
+                     f"LR p = {ev.p_value:.2g}, explains {100 * min(ev.explained, 1):.0f} % of the excess; "
+                     f"gap {s.gap_before:.3f} → {s.gap_after:.3f}.\n")
+            L.append("| candidate | k | Δχ² | ΔBIC | LR p | structure p |\n|---|---|---|---|---|---|")
+            for c in s.candidates:
+                L.append(f"| {c.effect} | {c.k} | {c.delta_chi2:.1f} | {c.delta_bic:.1f} | {c.p_value:.2g} | "
+                         f"{c.structure_p:.2g} |")
+            if s.effect in figures:
+                L.append(f"\n![residuals against {s.plot['covariate'] if s.plot else ''}]({figures[s.effect]})\n")
+        L.append("\n## Unexplained structure\n")
+        L.append("\n".join(f"- {u}" for u in self.unexplained) if self.unexplained else "None: the residuals are "
+                 "consistent with the noise against every covariate.")
+        if self.not_detectable:
+            L.append("\n## Not detectable from these data\n")
+            L.extend(f"- {n}: {w}" for n, w in self.not_detectable)
+        if self.not_testable:
+            L.append("\n## Not testable on these data\n")
+            L.extend(f"- {n}: {w}" for n, w in self.not_testable)
+        L.append(f"\n_Criterion: largest ΔBIC, added if ΔBIC > 0, Bonferroni LR p < {self.settings['alpha']}, and "
+                 f"explaining ≥ {100 * self.settings['min_explained']:.0f} % of the excess. Time {self.seconds:.1f} s._")
+        return "\n".join(L) + "\n"
+
+    def __str__(self) -> str:
+        return self.to_markdown()
+
+    # ---------------------------------------------------------------- figures
+    def plot_gap(self):
+        """Bar chart of the gap after each step (dashed: the noise level, 1)."""
+        from matplotlib.figure import Figure
+
+        fig = Figure(figsize=(4.5, 3.0), layout="constrained")
+        ax = fig.add_subplot()
+        labels = ["baseline"] + [f"+ {s}" for s in self.found]
+        ax.bar(range(len(self.gap)), self.gap, color=["0.6"] + ["C0"] * len(self.found))
+        ax.axhline(1.0, ls="--", color="k", lw=1, label="noise level")
+        ax.set_xticks(range(len(self.gap)), labels, rotation=20, ha="right")
+        ax.set_ylabel("gap (χ²/dof)")
+        if max(self.gap) / max(min(self.gap), 1e-9) > 20:
+            ax.set_yscale("log")
+        ax.legend(frameon=False)
+        return fig
+
+    def plot_step(self, i: int):
+        """Residuals against the telling covariate before and after step ``i`` (0-based)."""
+        from matplotlib.figure import Figure
+
+        s = self.steps[i]
+        fig = Figure(figsize=(8.0, 3.0), layout="constrained")
+        if not s.plot:
+            return fig
+        from ._discover import _binned_test
+
+        axs = fig.subplots(1, 2, sharey=True)
+        for ax, key, title in ((axs[0], "before", f"before (gap {s.gap_before:.2f})"),
+                               (axs[1], "after", f"after + {s.effect} (gap {s.gap_after:.2f})")):
+            x, r = np.asarray(s.plot[f"x_{key}"], float), np.asarray(s.plot[f"r_{key}"], float)
+            ax.plot(x, r, ".", ms=1.5, alpha=0.25, color="0.5", rasterized=True)
+            _, _, p, xc, mean, sem = _binned_test(r, x)
+            ax.errorbar(xc, mean, yerr=sem, fmt="o-", ms=3, color="C3", label="binned mean")
+            ax.axhline(0, color="k", lw=0.8)
+            ax.set_xlabel(s.plot["covariate"])
+            ax.set_title(f"{title}; p = {p:.1e}", fontsize=9)
+        lim = np.nanpercentile(np.abs(np.asarray(s.plot["r_before"], float)), 99) if len(s.plot["r_before"]) else 1
+        axs[0].set_ylim(-1.1 * lim - 1, 1.1 * lim + 1)
+        axs[0].set_ylabel("residual / σ")
+        axs[0].legend(frameon=False, fontsize=8)
+        return fig
+
+    def figures(self) -> dict:
+        """``{"gap": Figure, effect: Figure, …}``."""
+        out = {"gap": self.plot_gap()}
+        for i, s in enumerate(self.steps):
+            if s.plot:
+                out[s.effect] = self.plot_step(i)
+        return out
+
+    # ---------------------------------------------------------------- notebook
+    def _repr_markdown_(self) -> str:
+        return self.to_markdown()
+
+    def _repr_html_(self) -> str:
+        import html
+
+        figs = {}
+        for name, fig in self.figures().items():
+            buf = io.BytesIO()
+            fig.savefig(buf, format="png", dpi=90)
+            figs[name] = "data:image/png;base64," + base64.b64encode(buf.getvalue()).decode()
+        md = self.to_markdown(figs)
+        body = []
+        in_table = False
+        for line in md.splitlines():
+            if line.startswith("|"):
+                cells = [c.strip() for c in line.strip("|").split("|")]
+                if set("".join(cells)) <= set("-"):
+                    continue
+                if not in_table:
+                    body.append("<table>")
+                    in_table = True
+                body.append("<tr>" + "".join(f"<td>{html.escape(c)}</td>" for c in cells) + "</tr>")
+                continue
+            if in_table:
+                body.append("</table>")
+                in_table = False
+            if line.startswith("!["):
+                src = line[line.index("(") + 1: line.rindex(")")]
+                body.append(f'<img src="{src}"/>')
+            elif line.startswith("## "):
+                body.append(f"<h3>{html.escape(line[3:])}</h3>")
+            elif line.startswith("# "):
+                body.append(f"<h2>{html.escape(line[2:])}</h2>")
+            elif line.startswith("- "):
+                body.append(f"<li>{html.escape(line[2:])}</li>")
+            elif line.strip():
+                body.append(f"<p>{html.escape(line).replace('**', '')}</p>")
+        if in_table:
+            body.append("</table>")
+        return "<div>" + "\n".join(body) + "</div>"
+
+    # ---------------------------------------------------------------- files
+    def save(self, out_dir, *, extra: dict | None = None) -> dict[str, Path]:
+        """Write ``report.json``, ``report.md`` and the PNGs to ``out_dir`` (atomic writes).
+
+        ``extra`` entries are merged into ``report.json`` (e.g. the capture's name).
+        """
+        out = Path(out_dir)
+        out.mkdir(parents=True, exist_ok=True)
+        paths: dict[str, Path] = {}
+        links = {}
+        for name, fig in self.figures().items():
+            fn = "gap.png" if name == "gap" else f"residuals_{name}.png"
+            buf = io.BytesIO()
+            fig.savefig(buf, format="png", dpi=110)
+            _atomic(out / fn, buf.getvalue())
+            paths[name] = out / fn
+            links[name] = fn
+        d = self.to_dict()
+        if extra:
+            d.update(extra)
+        _atomic(out / "report.json", (json.dumps(d, indent=2, ensure_ascii=False) + "\n").encode())
+        _atomic(out / "report.md", self.to_markdown(links).encode())
+        paths["json"] = out / "report.json"
+        paths["md"] = out / "report.md"
+        return paths
+
+
+def _atomic(path: Path, data: bytes) -> None:
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    try:
+        with os.fdopen(fd, "wb") as fh:
+            fh.write(data)
+        os.replace(tmp, path)
+    except BaseException:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+        raise
