@@ -69,4 +69,8 @@ from .synthesis import reconstruct_steerable_pyramid as reconstruct_steerable_py
 from .synthesis import synthesize_texture as synthesize_texture
 # --- end texture
 
+# --- missing-effect discovery (issue 5)
+from . import effects as effects
+# --- end missing-effect discovery
+
 __version__ = "0.1.0"

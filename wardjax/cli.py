@@ -252,6 +252,39 @@ def texture_synthesize(model_path: Path, size: str, seed: int, iterations: int, 
 # --------------------------------------------------------------------------- end texture
 
 
+# --------------------------------------------------------------------------- diagnose (issue 5: missing effects)
+
+
+@main.command("diagnose")
+@click.argument("capture", type=click.Path(path_type=Path))
+@click.option("--out", "out_dir", type=click.Path(file_okay=False, path_type=Path), required=True,
+              help="Folder for report.json, report.md and the PNGs.")
+@click.option("--max-steps", type=click.IntRange(0, 10), default=4, show_default=True,
+              help="At most this many effects are added.")
+@click.option("--max-samples", type=click.IntRange(100, 10_000_000), default=20_000, show_default=True,
+              help="Bin the probe to at most this many pixels per channel.")
+def diagnose_cmd(capture: Path, out_dir: Path, max_steps: int, max_samples: int) -> None:
+    """Find the effects a capture needs beyond the Ward model: report.json, report.md, residual plots."""
+    from .capture import CaptureError, load_capture
+    from .effects import ScanlineModel, discover
+    from .effects._capture import capture_data
+
+    if not capture.exists():
+        _fail(f"{capture}: no such capture folder")
+    try:
+        cap = load_capture(capture)
+        data = capture_data(cap, max_samples=max_samples)
+        rep = discover(ScanlineModel(cap.config.fit.normalization), data, max_steps=max_steps)
+        rep.save(out_dir, extra={"capture": cap.name})
+    except (CaptureError, ValueError, OSError) as exc:
+        _fail(str(exc).splitlines()[0])
+    gaps = " → ".join(f"{g:.3f}" for g in rep.gap)
+    console.print(f"{cap.name}: {rep.verdict()}; gap {gaps}; report in {out_dir}/", highlight=False)
+
+
+# --------------------------------------------------------------------------- end diagnose
+
+
 if __name__ == "__main__":  # pragma: no cover
     main()
 

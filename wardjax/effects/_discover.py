@@ -49,6 +49,7 @@ import time
 import jax
 import jax.numpy as jnp
 import numpy as np
+import lineax as lx
 import optimistix as optx
 from scipy import stats
 
@@ -59,6 +60,7 @@ from ._report import Candidate, DiscoveryReport, FitState, Step
 __all__ = ["discover"]
 
 _N_BINS = 20
+_LINEAR_SOLVER = lx.QR()
 _PLOT_MAX = 20_000
 
 
@@ -106,7 +108,7 @@ class _Layout:
         out: dict[str, dict[str, float]] = {k: {} for k in self.slices}
         for i, (owner, p) in enumerate(self.entries):
             s = math.sqrt(max(cov_u[i, i], 0.0)) if np.isfinite(cov_u[i, i]) else math.nan
-            d = p.scale * (math.exp(u[i]) if p.kind == "log" else 1.0)
+            d = p.scale * (math.exp(min(u[i], 700.0)) if p.kind == "log" else 1.0)
             out.setdefault(owner, {})[p.name] = abs(d) * s
         return out
 
@@ -137,7 +139,7 @@ def _solve_batch(u0, idx, kmask, active, prior_w, data, *, model, effects, layou
         def resid(z, _):
             return jnp.concatenate([data_resid(z), pw * (z - z0)])
 
-        solver = optx.LevenbergMarquardt(rtol=1e-6, atol=1e-8)
+        solver = optx.LevenbergMarquardt(rtol=1e-6, atol=1e-8, linear_solver=_LINEAR_SOLVER)
         sol = optx.least_squares(resid, solver, u0[idx], max_steps=max_steps, throw=False)
         z = sol.value
         r = data_resid(z)
@@ -244,7 +246,7 @@ def discover(
     alpha: float = 0.01,
     min_explained: float = 0.5,
     structure_p: float = 1e-3,
-    lm_steps: int = 100,
+    lm_steps: int = 60,
     chunk: int = 64,
     keep_plot_data: bool = True,
     seed: int = 0,

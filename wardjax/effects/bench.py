@@ -252,6 +252,12 @@ def simulate_case(hidden: str | None, seed: int, *, n_scanlines: int = 8, n_samp
                      truth=truth)
 
 
+def case_seed(seed: int, hidden: str | None, k: int) -> int:
+    """The seed of draw ``k`` of ``hidden`` (distinct streams per effect and draw)."""
+    idx = 0 if hidden is None else 1 + (DETECTABLE + CANCELLED + (OUT_OF_LIBRARY,)).index(hidden)
+    return 1_000_003 * seed + 10_007 * idx + k
+
+
 def run_bench(n_draws: int = 10, n_null: int = 100, *, effects=DETECTABLE, seed: int = 0, n_scanlines: int = 8,
               n_samples: int = 256, out_of_library: int = 0, cancelled: int = 0, progress=None) -> dict:
     """Run ``discover`` blind on hidden-effect and null draws; tabulate.
@@ -268,9 +274,7 @@ def run_bench(n_draws: int = 10, n_null: int = 100, *, effects=DETECTABLE, seed:
     plan = [(e, k) for e in effects for k in range(n_draws)] + [(None, k) for k in range(n_null)]
     plan += [(OUT_OF_LIBRARY, k) for k in range(out_of_library)] + [(e, k) for e in CANCELLED for k in range(cancelled)]
     for j, (hidden, k) in enumerate(plan):
-        case = simulate_case(hidden, seed * 100_003 + 7919 * k + 31 * (DETECTABLE + CANCELLED + (OUT_OF_LIBRARY,)
-                                                                          ).index(hidden) + 1 if hidden else
-                             seed * 100_003 + 7919 * k, n_scanlines=n_scanlines, n_samples=n_samples)
+        case = simulate_case(hidden, case_seed(seed, hidden, k), n_scanlines=n_scanlines, n_samples=n_samples)
         t0 = time.perf_counter()
         rep = discover(model, case.data, keep_plot_data=False)
         rows.append({

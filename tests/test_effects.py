@@ -1,0 +1,141 @@
+"""The effect library: absent values leave the model alone, hooks against independent references,
+measurement inverses, symmetry cancellation, bad inputs."""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import wardjax as wj
+from wardjax.effects import LIBRARY, ScanlineModel, bench, get_effect, library, scanline_data
+
+
+@pytest.fixture(scope="module")
+def small():
+    return bench.simulate_case(None, 5, n_scanlines=3, n_samples=64)
+
+
+def _vals(effects, model, data, **over):
+    v = {"model": {"rho_s": 0.05, "alpha": 0.12}}
+    for e in effects:
+        v[e.name] = {p.name: (p.init if np.isnan(p.absent) else p.absent) for p in e.params}
+    for k, d in over.items():
+        v.setdefault(k, {}).update(d)
+    return v
+
+
+def test_library_covers_the_issue():
+    names = {e.name for e in LIBRARY}
+    for n in ("saturation", "ambient", "gamma", "illumination_gradient", "directional_emission", "fresnel",
+              "anisotropy", "second_lobe", "coloured_specular", "retroreflection", "contrast_gloss"):
+        assert n in names
+    assert {e.name for e in library("threshold")} == {"contrast_gloss", "lobe_floor", "ppb_curvature"}
+    for e in LIBRARY:
+        assert e.title and e.covariate and e.__doc__ and len(e.__doc__) > 200, e.name
+    with pytest.raises(ValueError, match="no effect named 'nope'"):
+        get_effect("nope")
+    with pytest.raises(ValueError, match="model must be"):
+        library("brdf")
+
+
+def test_absent_effects_are_the_identity(small):
+    """With every effect at its absent value the prediction equals the plain Ward prediction."""
+    m = ScanlineModel()
+    d = small.data
+    effs = tuple(e for e in library("scanline") if e.applicable(d) is None)
+    assert len(effs) >= 8
+    with jax.enable_x64(True):
+        act_off = {e.name: jnp.asarray(False) for e in effs}
+        act_on = {e.name: jnp.asarray(e.name != "saturation") for e in effs}
+        f_all, rho_all, _ = m.predict(_vals(effs, m, d), act_on, effs, d)
+        f_none, rho_none, _ = m.predict({"model": {"rho_s": 0.05, "alpha": 0.12}}, {}, (), d)
+        f_all, f_none = np.asarray(f_all), np.asarray(f_none)
+    np.testing.assert_allclose(f_all, f_none, rtol=1e-12)
+    # ... and the plain prediction is wardjax.ward_brdf with the profiled ρd
+    with jax.enable_x64(True):
+        ref = np.asarray(wj.ward_brdf(wj.WardParams(jnp.asarray(np.asarray(rho_none)), 0.05, 0.12, 0.12),
+                                      jnp.asarray(d.wi), jnp.asarray(d.wo)))
+    np.testing.assert_allclose(f_none, ref, rtol=1e-12)
+    del act_off
+
+
+def test_anisotropy_hook_matches_rotated_ward(small):
+    """The rotated anisotropic lobe equals ward_brdf evaluated in the turned tangent frame."""
+    m, d = ScanlineModel(), small.data
+    e = get_effect("anisotropy")
+    eta, phi = 0.3, 0.7
+    with jax.enable_x64(True):
+        f, rho, _ = m.predict({"model": {"rho_s": 0.05, "alpha": 0.12}, "anisotropy": {"eta": eta, "phi": phi}},
+                              {"anisotropy": jnp.asarray(True)}, (e,), d)
+        c, s = np.cos(phi), np.sin(phi)
+
+        def rot(w):
+            w = np.asarray(w)
+            return np.stack([c * w[..., 0] + s * w[..., 1], -s * w[..., 0] + c * w[..., 1], w[..., 2]], -1)
+
+        p = wj.WardParams(jnp.asarray(np.asarray(rho)), 0.05, 0.12 * np.exp(eta), 0.12 * np.exp(-eta))
+        ref = np.asarray(wj.ward_brdf(p, jnp.asarray(rot(d.wi)), jnp.asarray(rot(d.wo))))
+    np.testing.assert_allclose(np.asarray(f), ref, rtol=1e-10)
+
+
+@pytest.mark.parametrize("name,v", [("ambient", {"a": 0.03}), ("ambient", {"a": -0.01}), ("gamma", {"eps": 0.2}),
+                                    ("gamma", {"eps": -0.1}), ("illumination_gradient", {"b": 0.4})])
+def test_measurement_inverse(small, name, v):
+    """unmeasure(measure(f)) = f, and its derivative is the inverse of the forward derivative."""
+    m, d = ScanlineModel(), small.data
+    e = get_effect(name)
+    with jax.enable_x64(True):
+        ctx = m.context(d)
+        f = jnp.asarray(np.asarray(d.y))
+        y = e.measure(v, f, ctx)
+        back, dfdy = e.unmeasure(v, y, ctx)
+        dydf = jax.jvp(lambda ff: e.measure(v, ff, ctx), (f,), (jnp.ones_like(f),))[1]
+    np.testing.assert_allclose(np.asarray(back), np.asarray(f), rtol=1e-10, atol=1e-14)
+    np.testing.assert_allclose(np.asarray(dfdy) * np.asarray(dydf), 1.0, rtol=1e-9)
+
+
+def test_gamma_is_the_ratio_of_decoded_values():
+    """A γ mismatch on probe and standard gives f_std (f/f_std)^(1+ε): the exposure cancels."""
+    e = get_effect("gamma")
+    f, fs, eps, k = np.array([0.02, 0.3, 2.0]), 0.99 / np.pi, 0.15, 0.37
+    ratio = (k * f) ** (1 + eps) / (k * fs) ** (1 + eps) * fs
+    with jax.enable_x64(True):
+        got = np.asarray(e.measure({"eps": eps}, jnp.asarray(f), {"f_std": fs}))
+    np.testing.assert_allclose(got, ratio, rtol=1e-12)
+
+
+@pytest.mark.parametrize("hidden", ["symmetric_falloff", "directional_emission"])
+def test_symmetric_effects_cancel_from_the_ratio(hidden):
+    """Simulated on probe and standard, they leave v/v_std unchanged, and the library says so."""
+    c0 = bench.simulate_case(None, 11, n_scanlines=3, n_samples=64)
+    c1 = bench.simulate_case(hidden, 11, n_scanlines=3, n_samples=64)
+    np.testing.assert_allclose(np.asarray(c1.data.y), np.asarray(c0.data.y), rtol=1e-12)
+    why = get_effect(hidden).applicable(c1.data)
+    assert why is not None and "cancels" in why
+
+
+def test_saturation_applies_only_to_a_plateau(small):
+    assert "plateau" in get_effect("saturation").applicable(small.data)
+    sat = bench.simulate_case("saturation", 5, n_scanlines=3, n_samples=64)
+    assert get_effect("saturation").applicable(sat.data) is None
+
+
+def test_bench_strength_is_in_range():
+    for h in ("gamma", "anisotropy", "fresnel"):
+        c = bench.simulate_case(h, 3, n_scanlines=3, n_samples=64)
+        assert 3.0 <= c.strength_sigma <= 10.0
+
+
+def test_scanline_data_rejects_bad_input():
+    f = np.ones((2, 5, 3))
+    w = np.tile([0.0, 0.0, 1.0], (2, 5, 1))
+    with pytest.raises(ValueError, match=r"wi must have shape \(2, 5, 3\)"):
+        scanline_data(f, w[:, :4], w, 0.01)
+    with pytest.raises(ValueError, match="f_r must have shape"):
+        scanline_data(np.ones(5), w, w, 0.01)
+    with pytest.raises(ValueError, match="no usable observation"):
+        scanline_data(f * np.nan, w, w, 0.01)
+    with pytest.raises(ValueError, match="kind must be"):
+        scanline_data(f, w, w, 0.01, kind="radiance")
+    with pytest.raises(ValueError, match="sigma must be > 0"):
+        wj.effects.threshold_data([1, 2], [1, 2], [0, 1], [0.1, 0.2])
