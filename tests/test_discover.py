@@ -1,0 +1,163 @@
+"""discover: hidden effects named, null data left alone, gap to the noise level, an out-of-library
+effect reported as unexplained, Table 1's contrast gloss, CUReT, the report and 'wardjax diagnose'."""
+
+import json
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+import wardjax as wj
+from wardjax.cli import main
+from wardjax.effects import ScanlineModel, ThresholdModel, bench, discover
+from wardjax.effects._real import curet_data, load_curet, table1_threshold_data
+
+FAST = ("gamma", "anisotropy", "coloured_specular")
+
+
+@pytest.fixture(scope="module")
+def reports():
+    """One blind discover per case (8 scanlines × 128 samples × RGB = 3,072 residuals; the slow bench
+    uses 6,144)."""
+    out = {}
+    for h in (None,) + FAST + (bench.OUT_OF_LIBRARY,):
+        case = bench.simulate_case(h, bench.case_seed(0, h, 0), n_samples=128)
+        out[h] = (case, discover(ScanlineModel(), case.data))
+    return out
+
+
+def test_null_data_add_nothing(reports):
+    case, rep = reports[None]
+    assert rep.n_obs == 8 * 128 * 3
+    assert rep.found == []
+    assert rep.explained and "nothing missing" in rep.verdict()
+    assert 0.9 < rep.gap[0] < 1.1
+    # the symmetric effects are listed as undetectable, not tested
+    assert {n for n, _ in rep.not_detectable} == {"symmetric_falloff", "directional_emission"}
+    # the baseline recovers the simulated material
+    b = rep.baseline.values["model"]
+    assert abs(b["alpha"] / case.truth["alpha"] - 1) < 0.05
+    assert abs(b["rho_s"] / case.truth["rho_s"] - 1) < 0.1
+
+
+@pytest.mark.parametrize("hidden", FAST)
+def test_hidden_effect_named_first_and_gap_closes(reports, hidden):
+    case, rep = reports[hidden]
+    assert 3 <= case.strength_sigma <= 10
+    assert rep.found and rep.found[0] == hidden, (rep.found, rep.steps[0].candidates if rep.steps else None)
+    assert rep.gap[0] > 1.1 * rep.gap[-1]
+    assert rep.gap[-1] <= 1.1
+    st = rep.steps[0]
+    # evidence, not the raw drop: the winner has the largest ΔBIC and passes the LR test
+    assert st.evidence.delta_bic == max(c.delta_bic for c in st.candidates) > 0
+    assert st.evidence.p_value < 1e-6
+    assert all(np.isfinite(v) for v in st.stderr.values())
+
+
+def test_hidden_effect_parameters_recovered(reports):
+    case, rep = reports["gamma"]
+    eps = rep.steps[0].params["eps"]
+    assert abs(eps - case.truth["strength"]) < 4 * rep.steps[0].stderr["eps"] + 0.01 * abs(case.truth["strength"])
+
+
+def test_out_of_library_effect_is_reported_unexplained(reports):
+    """Orange peel (periodic waviness) is not in the library: no confident name, unexplained structure."""
+    case, rep = reports[bench.OUT_OF_LIBRARY]
+    assert rep.gap[0] > 2
+    assert rep.found == []
+    assert rep.unexplained and "exceeds the noise level" in rep.unexplained[0]
+    assert "unexplained discrepancy" in rep.verdict()
+
+
+def test_report_renders_and_saves(reports, tmp_path):
+    _, rep = reports["anisotropy"]
+    md = rep.to_markdown()
+    assert "Step 1: anisotropy" in md and "ΔBIC" in md
+    html = rep._repr_html_()
+    assert html.count("<img") == 2 and "anisotropy" in html
+    paths = rep.save(tmp_path)
+    d = json.loads((tmp_path / "report.json").read_text())
+    assert d["found"] == ["anisotropy"] and len(d["gap"]) == 2
+    assert d["steps"][0]["params"]["eta"] is not None
+    for p in ("gap.png", "residuals_anisotropy.png", "report.md"):
+        assert (tmp_path / p).stat().st_size > 1000
+    assert set(paths) >= {"json", "md", "gap", "anisotropy"}
+    # the residual structure against the telling covariate disappears
+    before = rep.steps[0].plot
+    from wardjax.effects._discover import _binned_test
+
+    assert _binned_test(before["r_before"], before["x_before"])[2] < 1e-6
+    assert _binned_test(before["r_after"], before["x_after"])[2] > 1e-4
+
+
+def test_table1_contrast_gloss(capsys, tmp_path):
+    """Smartphone paper Table 1: one PPB→SD line for all lightnesses misses contrast gloss."""
+    data = table1_threshold_data()
+    # the published data: gloss 95–30 × four lightnesses, Table 1a/1b
+    assert data.n_obs == 16
+    np.testing.assert_allclose(np.asarray(data.sd)[:4], [0.321, 0.839, 1.915, 2.751])
+    np.testing.assert_allclose(np.asarray(data.ppb)[-4:], [1, 5, 9, 15])
+    rep = discover(ThresholdModel(), data)
+    assert rep.found == ["contrast_gloss"]
+    assert rep.gap[0] > 1.3 and rep.gap[1] < rep.gap[0] / 1.4
+    c, sc = rep.steps[0].params["c"], rep.steps[0].stderr["c"]
+    assert c < -2 * sc  # lighter surfaces: shallower PPB → SD slope (paper, Fig. 8a)
+    # the competing lightness effect was fitted on its unphysical side: no evidence
+    floor = next(x for x in rep.steps[0].candidates if x.effect == "lobe_floor")
+    assert not floor.physical and floor.delta_chi2 == 0
+    print(rep)
+    rep.save(tmp_path)
+    out = capsys.readouterr().out
+    assert "contrast_gloss" in out and "Gap per step" in out
+    assert (tmp_path / "gap.png").exists() and (tmp_path / "residuals_contrast_gloss.png").exists()
+
+
+@pytest.mark.slow
+def test_curet_ward_fits_and_discover():
+    ids, brdf, wi, wo = load_curet()
+    assert brdf.shape == (61, 205) and ids[0] == 1
+    # a Ward fit per sample at its 205 direction pairs (grey in all three channels)
+    f = np.repeat(brdf[:, :, None], 3, axis=-1)
+    fit = wj.fit_scanlines(f, np.broadcast_to(wi, (61, 205, 3)), np.broadcast_to(wo, (61, 205, 3)),
+                           weights=1.0 / (0.05 * np.maximum(f, 1e-3)) ** 2)
+    assert np.mean(np.isfinite(fit.params.alpha_x)) > 0.9
+    data, rel, sid = curet_data(0)
+    assert 0.005 < rel < 0.3
+    rep = discover(ScanlineModel(), data)
+    assert rep.gap[0] > 2 and rep.found and rep.gap[-1] < rep.gap[0] / 2
+
+
+def test_cli_diagnose(tmp_path):
+    p = wj.WardParams(rho_d=(0.5, 0.4, 0.3), rho_s=0.05, alpha_x=0.12, alpha_y=0.12)
+    wj.simulate_capture(p, tmp_path / "cap", seed=0, image_size=(160, 120), texture="none")
+    r = CliRunner().invoke(main, ["diagnose", str(tmp_path / "cap"), "--out", str(tmp_path / "rep")])
+    assert r.exit_code == 0, r.output
+    d = json.loads((tmp_path / "rep" / "report.json").read_text())
+    assert d["found"] == [] and len(d["gap"]) == 1 and d["capture"]
+    assert (tmp_path / "rep" / "report.md").exists() and (tmp_path / "rep" / "gap.png").exists()
+    r = CliRunner().invoke(main, ["diagnose", str(tmp_path / "nope"), "--out", str(tmp_path / "rep2")])
+    out = " ".join(r.output.split())
+    assert r.exit_code == 2 and "no such capture folder" in out and "Traceback" not in out
+
+
+def test_discover_rejects_mismatched_inputs():
+    with pytest.raises(TypeError, match="do not suit a threshold model"):
+        discover(ThresholdModel(), bench.simulate_case(None, 1, n_scanlines=2, n_samples=16).data)
+    with pytest.raises(TypeError, match="model must provide"):
+        discover(object(), table1_threshold_data())
+    with pytest.raises(ValueError, match="alpha must be in"):
+        discover(ThresholdModel(), table1_threshold_data(), alpha=2.0)
+
+
+@pytest.mark.slow
+def test_full_bench():
+    """≥ 10 draws per detectable effect, ≥ 100 null draws, the out-of-library effect, cancelled effects."""
+    s = bench.run_bench(n_draws=10, n_null=100, out_of_library=5, cancelled=2)
+    print(bench.bench_table(s))
+    assert s["named_first_all"] >= 0.95
+    assert s["null_false_rate"] <= 0.05 and s["n_null"] >= 100
+    named = [r for r in s["rows"] if r["hidden"] in bench.DETECTABLE and r["first"] == r["hidden"]]
+    assert all(r["gap_after"] <= 1.1 and r["n_obs"] >= 5000 for r in named)
+    ool = [r for r in s["rows"] if r["hidden"] == bench.OUT_OF_LIBRARY]
+    assert all(r["unexplained"] and not r["found"] for r in ool)
+    assert all(not r["found"] for r in s["rows"] if r["hidden"] in bench.CANCELLED)
