@@ -315,3 +315,41 @@ def test_combined_optimum_does_not_depend_on_the_start():
         for name in ("alpha_x", "alpha_y", "rho_s"):
             diff = abs(getattr(c.params, name) - getattr(fits[0].params, name))
             assert diff <= 2e-3 * getattr(fits[0].stderr, name) + 1e-12, name
+
+
+def _textured(rng, s=32, amplitude=0.0):
+    """Scanlines whose ρd varies smoothly along y (a texture the per-scanline ρd cannot absorb)."""
+    truth = wj.WardParams(rho_d=np.full((s, 3), 0.4), rho_s=np.full(s, 0.04), alpha_x=np.full(s, 0.12),
+                          alpha_y=np.full(s, 0.15))
+    data = wj.simulate_scanlines(truth, x_offsets=np.linspace(-60, 60, s), seed=rng)
+    y = np.linspace(0, 1, data.f_r.shape[1])
+    phases = rng.uniform(0, 2 * np.pi, (s, 3))
+    texture = amplitude * (np.sin(2 * np.pi * 3 * y[None, :, None] + phases[:, None, :])
+                           + 0.5 * np.sin(2 * np.pi * 7 * y[None, :, None] + 2 * phases[:, None, :]))
+    f = data.f_r + texture / np.pi  # σ (1 % of the whole signal) is unchanged: the texture is not noise
+    return truth, data, f
+
+
+def test_robust_errors_agree_with_model_errors_on_independent_noise():
+    rng = np.random.default_rng(61)
+    truth, data, f = _textured(rng, amplitude=0.0)
+    c = wj.fit_scanlines(f, data.wi, data.wo, weights=1 / data.sigma**2).combined("anisotropic")
+    assert c.errors == "robust"
+    ratio = np.sqrt(np.diag(c.covariance_robust) / np.diag(c.covariance_model))
+    assert np.all((ratio > 0.6) & (ratio < 1.6)), ratio
+
+
+def test_robust_errors_cover_the_truth_when_texture_correlates_the_residuals():
+    rng = np.random.default_rng(62)
+    for _ in range(3):
+        truth, data, f = _textured(rng, amplitude=0.03)
+        c = wj.fit_scanlines(f, data.wi, data.wo, weights=1 / data.sigma**2).combined("anisotropic")
+        assert c.status == wj.Status.CONVERGED
+        se_model = np.sqrt(np.diag(c.covariance_model))
+        se_robust = np.sqrt(np.diag(c.covariance_robust))
+        # A texture along y confounds with the lobe width along y: the model-based
+        # error of αy (covariance order ρs, αx, αy) is several times too small.
+        assert se_robust[2] > 2 * se_model[2]
+        for name in ("alpha_x", "alpha_y", "rho_s"):
+            z = (getattr(c.params, name) - getattr(truth, name)[0]) / getattr(c.stderr, name)
+            assert abs(z) < 4, (name, z)

@@ -74,7 +74,14 @@ class CombinedFit:
         ``(S, 3)`` the per-scanline ρd at the joint optimum (NaN for scanlines
         left out).
     covariance
-        Covariance of the shared parameters ``(ρs, α)`` or ``(ρs, αx, αy)``.
+        Covariance of the shared parameters ``(ρs, α)`` or ``(ρs, αx, αy)``
+        that ``stderr`` reports (see ``errors``).
+    covariance_model, covariance_robust
+        The Gauss–Newton covariance scaled by χ²/dof (residuals independent),
+        and the sandwich covariance clustered by scanline (residuals may be
+        correlated along a scanline, as ρd texture makes them).
+    errors
+        ``"robust"`` or ``"model"``: which covariance ``stderr`` reports.
     chi2, dof, status
         Fit quality and :class:`Status`; ``n_scanlines`` were used.
     """
@@ -89,6 +96,9 @@ class CombinedFit:
     n_scanlines: int
     model: str
     normalization: str
+    covariance_model: np.ndarray | None = None
+    covariance_robust: np.ndarray | None = None
+    errors: str = "model"
 
     @property
     def reduced_chi2(self) -> float:
@@ -142,7 +152,12 @@ class ScanlineFit:
         return int(self.status.shape[0])
 
     def combined(
-        self, model: Model | None = None, *, max_steps: int = 256, rtol: float = 1e-10
+        self,
+        model: Model | None = None,
+        *,
+        errors: Literal["robust", "model"] = "robust",
+        max_steps: int = 256,
+        rtol: float = 1e-10,
     ) -> CombinedFit:
         """Joint refit over all scanlines: shared ρs, αx, αy; ρd per scanline.
 
@@ -159,11 +174,21 @@ class ScanlineFit:
         model
             ``"isotropic"`` (one shared α) or ``"anisotropic"``; defaults to
             the model of the per-scanline fits.
+        errors
+            ``"robust"`` (default): the sandwich covariance clustered by
+            scanline, ``A⁻¹ (Σ_s g_s g_sᵀ · S/(S−1)) A⁻¹`` with ``A = JᵀJ`` and
+            ``g_s = J_sᵀ r_s`` the score of scanline ``s``. It stays honest when
+            the residuals are correlated along a scanline — an unmodelled ρd
+            texture, a slightly wrong lobe shape — where the model-based
+            ``A⁻¹ χ²/dof`` assumes independent noise and can be many times too
+            small. With fewer than 10 scanlines it falls back to ``"model"``.
+            ``"model"``: the Gauss–Newton covariance scaled by χ²/dof.
         """
         model = model or self.model
         _check_choice("model", model, ("isotropic", "anisotropic"))
+        _check_choice("errors", errors, ("robust", "model"))
         with jax.enable_x64(True):
-            return _combined(self, model, max_steps=max_steps, rtol=rtol)
+            return _combined(self, model, errors=errors, max_steps=max_steps, rtol=rtol)
 
 
 # --------------------------------------------------------------------------- boundary
@@ -465,7 +490,7 @@ def _joint_residual(y, a: _JointArgs, iso: bool):
     return jnp.sqrt(jnp.broadcast_to(a.w, a.f.shape)) * r
 
 
-def _combined(res: ScanlineFit, model: str, *, max_steps: int, rtol: float) -> CombinedFit:
+def _combined(res: ScanlineFit, model: str, *, errors: str, max_steps: int, rtol: float) -> CombinedFit:
     iso = model == "isotropic"
     f, wi, wo, mask, weights = res._data
     k = 1 if iso else 2
@@ -492,11 +517,13 @@ def _combined(res: ScanlineFit, model: str, *, max_steps: int, rtol: float) -> C
     geom = ward_geometry(jnp.asarray(wi_p), jnp.asarray(wo_p), res.normalization)
     args = _JointArgs(jnp.asarray(f_p), geom.u, geom.v, geom.g,
                       jnp.where(geom.valid[..., None], jnp.asarray(w_p), 0.0))
-    good = res.status == Status.CONVERGED
-    pick = good if np.any(good) else use
-    rs0 = float(np.median(res.params.rho_s[pick]))
-    a0 = float(np.median(np.sqrt(res.params.alpha_x[pick] * res.params.alpha_y[pick])))
-    y = jnp.asarray([math.log(max(rs0, 1e-6))] + [math.log(a0)] * k, jnp.float64)
+    # Start: the best of a log-α grid of the joint profiled χ² (for fixed α the
+    # joint model is linear in every ρd and the shared ρs), not the per-scanline
+    # fits, which a strong texture can spoil.
+    prepared = _prepare_chunk(f_p, wi_p, wo_p, None, w_p, iso=True, normalization=res.normalization,
+                              dtype=np.dtype(np.float64))
+    log_a, rs0 = (float(v) for v in _joint_grid_start(prepared))
+    y = jnp.asarray([math.log(max(rs0, 1e-6))] + [log_a] * k, jnp.float64)
     n_obs = int(np.sum(np.broadcast_to(np.asarray(args.w), args.f.shape) > 0))
     dof = n_obs - (3 * n_use + 1 + k)
     # optimistix's LM stops on small steps, which a large damping can also
@@ -509,8 +536,11 @@ def _combined(res: ScanlineFit, model: str, *, max_steps: int, rtol: float) -> C
         jac = np.asarray(jac).reshape(-1, 1 + k)
         r = np.asarray(r).ravel()
         jtj = jac.T @ jac
-        step = np.linalg.solve(jtj, -jac.T @ r)
-        sigma = np.sqrt(np.diag(np.linalg.inv(jtj)) * float(r @ r) / max(dof, 1))
+        try:
+            step = np.linalg.solve(jtj, -jac.T @ r)
+            sigma = np.sqrt(np.diag(np.linalg.inv(jtj)) * float(r @ r) / max(dof, 1))
+        except np.linalg.LinAlgError:  # degenerate optimum (e.g. ρs → 0): reported as nonfinite below
+            break
         if np.all(np.abs(step) <= 1e-3 * sigma + 1e-12):
             certified = True
             break
@@ -523,7 +553,15 @@ def _combined(res: ScanlineFit, model: str, *, max_steps: int, rtol: float) -> C
     # residual already has every ρd projected out, so JᵀJ is the Schur complement.
     nat = np.exp(y)
     jac_nat = jac / nat[None, :]
-    cov = np.linalg.inv(jac_nat.T @ jac_nat) * scale
+    info = jac_nat.T @ jac_nat
+    a_inv = np.linalg.pinv(info) if np.all(np.isfinite(info)) else np.full_like(info, np.nan)
+    cov_model = a_inv * scale
+    # Sandwich clustered by scanline: each scanline's score g_s = J_sᵀ r_s.
+    scores = np.einsum("snp,sn->sp", jac_nat.reshape(rows, -1, 1 + k), r.reshape(rows, -1))[:n_use]
+    meat = scores.T @ scores * n_use / max(n_use - 1, 1)
+    cov_robust = a_inv @ meat @ a_inv
+    used = "robust" if errors == "robust" and n_use >= 10 else "model"
+    cov = cov_robust if used == "robust" else cov_model
     se = np.sqrt(np.clip(np.diag(cov), 0, None))
 
     a_lin, _ = _joint_rho_d(jnp.asarray(y[0]), jnp.asarray(y[1:]), args, iso)
@@ -553,7 +591,35 @@ def _combined(res: ScanlineFit, model: str, *, max_steps: int, rtol: float) -> C
         n_scanlines=n_use,
         model=model,
         normalization=res.normalization,
+        covariance_model=cov_model,
+        covariance_robust=cov_robust,
+        errors=used,
     )
+
+
+_JOINT_GRID = np.linspace(math.log(2e-3), math.log(1.0), 24)
+
+
+@jax.jit
+def _joint_grid_start(prepared):
+    """``(log α, ρs)`` minimising the joint profiled χ² on a log-α grid, refined by a parabola."""
+    thetas = jnp.asarray(_JOINT_GRID)
+
+    def per_scanline(p):
+        st = jax.vmap(lambda th: _varpro.stats(th[None], p, True, with_jac=False))(thetas)
+        return st.sbf, st.sbb
+
+    sbf, sbb = jax.vmap(per_scanline)(prepared)  # (S, G); padded rows contribute 0
+    sf, sb = jnp.sum(sbf, axis=0), jnp.sum(sbb, axis=0)
+    gain = jnp.where((sf > 0) & (sb > 0), sf * sf / jnp.where(sb > 0, sb, 1.0), 0.0)  # χ² = K₀ − gain
+    i = jnp.clip(jnp.argmax(gain), 1, thetas.shape[0] - 2)
+    gm, g0, gp = gain[i - 1], gain[i], gain[i + 1]
+    h = thetas[1] - thetas[0]
+    curv = gm - 2 * g0 + gp
+    shift = jnp.where(curv < 0, 0.5 * h * (gm - gp) / jnp.where(curv < 0, curv, -1.0), 0.0)
+    theta = thetas[i] + jnp.clip(shift, -h, h)
+    rs = jnp.where(sb[i] > 0, jnp.maximum(sf[i], 0.0) / jnp.where(sb[i] > 0, sb[i], 1.0), 0.0)
+    return theta, rs
 
 
 @eqx.filter_jit
