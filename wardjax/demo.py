@@ -26,9 +26,28 @@ TEXTURES = {"desk": "wood", "marble": "marble"}
 
 
 def _pm(value, err, digits: int = 4) -> str:
+    """``value ± err`` with the error to two significant digits (never a bare ``± 0.0000``)."""
     if value is None:
         return "–"
-    return f"{value:.{digits}f} ± {err:.{digits}f}" if err is not None else f"{value:.{digits}f}"
+    if err is None or not np.isfinite(err) or err <= 0:
+        return f"{value:.{digits}f}"
+    places = max(digits, 1 - int(np.floor(np.log10(err))))
+    return f"{value:.{places}f} ± {err:.{places}f}"
+
+
+def _true_mean_rho_d(capture: Path, fit: Path) -> float | None:
+    """Mean of the simulated ρd texture over the pixels the fit used (what the fitted ρd estimates)."""
+    try:
+        import tifffile
+
+        truth = tifffile.imread(capture / "truth_rho_d.tif")
+        fitted = tifffile.imread(fit / "rho_d.tif")
+    except (OSError, ValueError):
+        return None
+    if truth.shape != fitted.shape:
+        return None
+    valid = np.all(np.isfinite(fitted), axis=-1)
+    return float(np.mean(truth[valid])) if np.any(valid) else None
 
 
 def run_capture_demo(out_dir, *, seed: int = 0, image_size=(480, 360), console: Console | None = None) -> dict:
@@ -55,7 +74,9 @@ def run_capture_demo(out_dir, *, seed: int = 0, image_size=(480, 360), console: 
     results = {}
     for it in items:
         t = truth[it.name]
-        table.add_row(it.name, "true", f"{float(np.mean(t.rho_d)):.4f}", f"{float(t.rho_s):.4f}",
+        rd_true = _true_mean_rho_d(cap_root / it.name, out_dir / "fits" / it.name)
+        rd_true = float(np.mean(t.rho_d)) if rd_true is None else rd_true
+        table.add_row(it.name, "true", f"{rd_true:.4f}", f"{float(t.rho_s):.4f}",
                       f"{float(t.alpha_x):.4f}", f"{float(t.alpha_y):.4f}", "")
         if it.status != "ok":
             table.add_row("", "[red]error[/]", it.error, "", "", "", "", end_section=True)
