@@ -261,18 +261,30 @@ def _clean(f, wi, wo, mask, weights, dtype):
     return jnp.where(finite, f, 0.0), jnp.where(dirs_ok, wi, up), jnp.where(dirs_ok, wo, up), w
 
 
-# The fast path is compiled as two stages. Stage A cleans the inputs and builds
-# each scanline's geometry and moment matrices; stage B runs the search on
-# them. Compiled as one program, XLA:CPU lays out and fuses the moments so
+# The fast path is compiled as separate stages. Stage A cleans the inputs and
+# builds each scanline's geometry, then its moment matrices; stage B runs the
+# search on them. Compiled as one program, XLA:CPU lays out and fuses the moments so
 # that every evaluation of the search costs ~5× more (measured: 1.5 vs 6–10 ms
 # CPU per evaluation of 1,024 scanlines); materialising them between two
 # programs keeps each evaluation a plain exp plus two small mat-vecs.
 
 
-@functools.partial(jax.jit, static_argnames=("iso", "normalization", "dtype"))
-def _prepare_chunk(f, wi, wo, mask, weights, *, iso, normalization, dtype):
+@functools.partial(jax.jit, static_argnames=("normalization", "dtype"))
+def _geometry_chunk(f, wi, wo, mask, weights, *, normalization, dtype):
     f, wi, wo, w = _clean(f, wi, wo, mask, weights, dtype)
-    return jax.vmap(lambda *a: _varpro.prepare_scanline(*a, iso=iso, normalization=normalization))(f, wi, wo, w)
+    geom = ward_geometry(wi, wo, normalization)
+    return f, geom.u, geom.v, geom.g, jnp.where(geom.valid[..., None], w, 0.0)
+
+
+@functools.partial(jax.jit, static_argnames=("iso",))
+def _moments_chunk(f, u, v, g, w, *, iso):
+    return jax.vmap(lambda *a: _varpro.prepare(*a, iso))(f, u, v, g, w)
+
+
+def _prepare_chunk(f, wi, wo, mask, weights, *, iso, normalization, dtype):
+    # Geometry and moments as separate programs too: ~25 % less CPU than one.
+    parts = _geometry_chunk(f, wi, wo, mask, weights, normalization=normalization, dtype=dtype)
+    return _moments_chunk(*parts, iso=iso)
 
 
 @functools.partial(jax.jit, static_argnames=("iso", "rtol"))
