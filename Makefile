@@ -17,11 +17,14 @@ $(STAMP): pyproject.toml
 demo: install
 	$(VENV)/bin/wardjax demo --out demo-output
 
+# Two workers, whole test files per worker (module fixtures are computed once).
+PYTEST_PAR ?= -n 2 --dist loadfile
+
 test: install
-	$(PY) -m pytest -m "not slow"
+	$(PY) -m pytest -m "not slow" $(PYTEST_PAR)
 
 test-slow: install
-	$(PY) -m pytest -m slow
+	$(PY) -m pytest -m slow $(PYTEST_PAR)
 
 bench: install
 	$(PY) -m benchmarks

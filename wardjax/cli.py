@@ -12,6 +12,7 @@ from pathlib import Path
 
 import click
 from rich.console import Console
+from rich.markup import escape
 
 __all__ = ["main"]
 
@@ -25,7 +26,13 @@ def main() -> None:
 
 
 def _fail(message: str) -> None:
-    Console(stderr=True).print(f"[bold red]error:[/] {message}", highlight=False)
+    """Print one unwrapped ``error: …`` line on stderr and exit with status 2.
+
+    ``soft_wrap`` keeps a long message (a deep path) on one line, and the
+    message is escaped so that text like ``[y0, y1, x0, x1]`` is not read as
+    rich markup.
+    """
+    Console(stderr=True, soft_wrap=True).print(f"[bold red]error:[/] {escape(message)}", highlight=False)
     sys.exit(2)
 
 
