@@ -1,4 +1,4 @@
-"""Run every benchmark: ``python -m benchmarks`` (what ``make bench`` does)."""
+"""Run every benchmark: ``python -m benchmarks [NAME ...]`` (``make bench`` runs them all)."""
 
 import importlib
 import pkgutil
@@ -11,6 +11,7 @@ import benchmarks
 def main() -> int:
     names = sorted(m.name for m in pkgutil.iter_modules(benchmarks.__path__) if m.name.startswith("bench_"))
     only = set(sys.argv[1:])
+    sys.argv = sys.argv[:1]  # each benchmark runs with its defaults; the names above only select
     for name in names:
         if only and name not in only and name.removeprefix("bench_") not in only:
             continue
