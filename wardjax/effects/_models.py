@@ -21,9 +21,10 @@ Scanline model
     back through the (monotone) measurement chain, ``y' = M⁻¹(y)`` with
     ``σ' = σ |dM⁻¹/dy|`` (delta method, exact to first order in ``σ/y``), where
     ρd is linear and solved in closed form (a weighted mean) for every trial
-    of the other parameters. The residual is ``(y' − f)/σ'``; observations a
-    saturation effect declares censored contribute ``−2 log Φ((f − y')/σ')``
-    instead (the censored likelihood) and are left out of the ρd mean.
+    of the other parameters. The residual is exact, ``(y − M(f))/σ``;
+    observations a saturation effect declares censored contribute
+    ``−2 log Φ((M(f) − y)/σ)`` instead (the censored likelihood) and are left
+    out of the ρd mean.
 
 Threshold model
     Table 1 of the smartphone paper: lobe SD against threshold PPB, one line
@@ -320,9 +321,14 @@ class ScanlineModel:
         sw = jnp.sum(w, axis=1, keepdims=True)
         rho = jnp.pi * jnp.sum(w * (yp - term), axis=1, keepdims=True) / jnp.maximum(sw, _TINY)
         f = rho / jnp.pi + term
-        z = (yp - f) / sp
+        # the deviance is exact, in the measured space: ρd above is the closed-form profile
+        # of the linearised problem (close to, never better than, the exact optimum), so a
+        # measurement effect cannot lower χ² by stretching the propagated noise
+        for e in effects:
+            f = e.measure(vals[e.name], f, ctx)
+        z = (data.y - f) / data.sigma
         if censoring:
-            # a censored value says only "true value ≥ y": P = Φ((f − y')/σ')
+            # a censored value says only "true value ≥ y": P = Φ((f − y)/σ)
             t = jnp.where(cens, -z, 0.0)
             rc = jnp.sqrt(jnp.maximum(-2.0 * log_ndtr(t), 0.0) + 1e-12)
             z = jnp.where(cens, rc, z)
@@ -338,8 +344,6 @@ class ScanlineModel:
         """Prediction of the measured values ``(S, N, C)``, profiled ρd ``(S, 1, C)``, censored mask."""
         ctx = self.context(data)
         r, f, rho, cens = self._profile(vals, active, effects, data, ctx)
-        for e in effects:
-            f = e.measure(vals[e.name], f, ctx)
         return f, rho, cens
 
     # ---------------------------------------------------------------- covariates
