@@ -153,9 +153,6 @@ def _solve_batch(u0, idx, kmask, active, prior_w, data, *, model, effects, layou
     return jax.vmap(one)(u0, idx, kmask, active)
 
 
-_STATS: list = []
-
-
 def _fit_batch(jobs, layout, model, effects, data, k_pad, b_pad, max_steps, chunk):
     """Solve a list of jobs ``(u0, free indices, active effect indices)`` in padded batches."""
     key = layout.key
@@ -175,11 +172,10 @@ def _fit_batch(jobs, layout, model, effects, data, k_pad, b_pad, max_steps, chun
         pad = part + [part[0]] * (min(b_pad, chunk) - len(part)) if len(part) < min(b_pad, chunk) else part
         U0, IDX, KM, A = (np.stack(col) for col in zip(*pad))
         with jax.enable_x64(True):
-            u, chi2, jtj, ok, nst = _solve_batch(jnp.asarray(U0), jnp.asarray(IDX), jnp.asarray(KM), jnp.asarray(A),
+            u, chi2, jtj, ok, _ = _solve_batch(jnp.asarray(U0), jnp.asarray(IDX), jnp.asarray(KM), jnp.asarray(A),
                                                  jnp.asarray(layout.prior_w), data, model=model, effects=effects, layout_key=key,
                                             max_steps=max_steps)
             u, chi2, jtj, ok = (np.asarray(x) for x in (u, chi2, jtj, ok))
-            _STATS.append(np.asarray(nst))
         for i in range(len(part)):
             out.append((u[i], float(chi2[i]), jtj[i], bool(ok[i]), part[i][1], part[i][2]))
     return out
