@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from typing import NamedTuple
 
 import jax
 import numpy as np
@@ -145,6 +146,88 @@ def _smooth_on(image: np.ndarray, mask: np.ndarray, sigma: float) -> np.ndarray:
     return out
 
 
+class Reconstruction(NamedTuple):
+    """Per-pixel BRDF values of a capture (image-based paper, section 3), on the image grid.
+
+    Attributes
+    ----------
+    f_r
+        ``(H, W, 3)`` reconstructed BRDF (sr⁻¹); NaN off the probe and where masked.
+    flags
+        ``(H, W)`` :class:`~wardjax.MaskReason` bits of each probe pixel.
+    wi, wo
+        ``(H, W, 3)`` directions to lamp and camera in the material frame (0 off the probe).
+    points
+        ``(H, W, 3)`` sample-plane positions (mm); NaN off the probe.
+    probe
+        ``(H, W)`` the pixel sees the probe.
+    """
+
+    f_r: np.ndarray
+    flags: np.ndarray
+    wi: np.ndarray
+    wo: np.ndarray
+    points: np.ndarray
+    probe: np.ndarray
+
+
+def reconstruct_capture(cap, *, band_rows: int = 512, dtype=np.float32) -> Reconstruction:
+    """Reconstruct ``f_r`` for every probe pixel of a ``method = "scanline"`` capture.
+
+    The standard's image is smoothed first (``fit.smooth_standard_px``): it is
+    uniform and Lambertian, so it varies only slowly with irradiance and
+    vignetting, and smoothing removes its noise and quantisation from every
+    reconstructed value. Then, ``band_rows`` rows at a time, each probe pixel
+    is back-projected, its mirror point on the standard sampled bilinearly,
+    and :func:`~wardjax.reconstruct_brdf` applied with its masks. ``dtype``
+    sets the storage (float32 keeps a 12 MP capture in memory).
+    """
+    cfg, rig = cap.config, cap.rig
+    cam = rig.camera
+    h, w = cam.height, cam.width
+    f_r = np.full((h, w, 3), np.nan, dtype)
+    wi = np.zeros((h, w, 3), dtype)
+    wo = np.zeros((h, w, 3), dtype)
+    points = np.full((h, w, 3), np.nan, dtype)
+    flags = np.zeros((h, w), np.uint8)
+    probe = np.zeros((h, w), bool)
+    cols = np.arange(w, dtype=np.float64)
+    lit_std, dark_std = cap.lit, cap.dark
+    sigma = cfg.fit.smooth_standard_px
+    if sigma > 0:
+        std_mask = np.zeros((h, w), bool)
+        for r0 in range(0, h, band_rows):
+            r1 = min(r0 + band_rows, h)
+            u, v = np.meshgrid(cols, np.arange(r0, r1, dtype=np.float64))
+            pts, hit = back_project(cam, u, v)
+            std_mask[r0:r1] = hit & in_box(pts, rig.standard_box())
+        std_mask &= ~cap.lit_clipped.any(axis=-1)
+        lit_std = _smooth_on(cap.lit, std_mask, sigma)
+        dark_std = None if cap.dark is None else _smooth_on(cap.dark, std_mask, sigma)
+    for r0 in range(0, h, band_rows):
+        r1 = min(r0 + band_rows, h)
+        u, v = np.meshgrid(cols, np.arange(r0, r1, dtype=np.float64))
+        g = pixel_geometry(rig, u, v)
+        inp = g.in_probe
+        probe[r0:r1] = inp
+        if not inp.any():
+            continue
+        muv = g.mirror_pixels[inp]
+        v_std, clip_std = sample_bilinear(lit_std, muv, reduce_max=cap.lit_clipped)
+        v_std_bg = None if dark_std is None else sample_bilinear(dark_std, muv)
+        v_bg = None if cap.dark is None else cap.dark[r0:r1][inp]
+        fr, fl = reconstruct_brdf(
+            cap.lit[r0:r1][inp], v_bg, v_std, v_std_bg, cap.rho_standard, on_standard=g.mirror_ok[inp],
+            saturated=cap.lit_clipped[r0:r1][inp] | clip_std, noise_floor=cfg.fit.noise_floor, return_flags=True,
+        )
+        f_r[r0:r1][inp] = fr
+        flags[r0:r1][inp] = np.bitwise_or.reduce(fl, axis=-1)
+        wi[r0:r1][inp] = to_material_frame(g.wi[inp], cap.tangent)
+        wo[r0:r1][inp] = to_material_frame(g.wo[inp], cap.tangent)
+        points[r0:r1][inp] = g.points[inp]
+    return Reconstruction(f_r, flags, wi, wo, points, probe)
+
+
 def fit_capture(cap: Capture, *, max_fit_samples: int = 200_000, band_rows: int = 512) -> CaptureFit:
     """Fit a loaded capture: material, uncertainties, texture and diagnostics.
 
@@ -178,53 +261,9 @@ def fit_capture(cap: Capture, *, max_fit_samples: int = 200_000, band_rows: int 
     tangent = cap.tangent
     lit_name = cfg.images.lit
 
-    f_r = np.full((h, w, 3), np.nan, np.float32)
-    wi = np.zeros((h, w, 3), np.float32)
-    wo = np.zeros((h, w, 3), np.float32)
-    flags = np.zeros((h, w), np.uint8)
-    probe = np.zeros((h, w), bool)
-    xs = np.full((h, w), np.nan, np.float32)
-    ys = np.full((h, w), np.nan, np.float32)
-    cols = np.arange(w, dtype=np.float64)
-    lit_std, dark_std = cap.lit, cap.dark
-    sigma = cfg.fit.smooth_standard_px
-    if sigma > 0:
-        # The standard is uniform and Lambertian: its image varies only with the
-        # irradiance and the vignetting, slowly. Smoothing it removes its noise
-        # and quantisation from every reconstructed value.
-        std_mask = np.zeros((h, w), bool)
-        for r0 in range(0, h, band_rows):
-            r1 = min(r0 + band_rows, h)
-            u, v = np.meshgrid(cols, np.arange(r0, r1, dtype=np.float64))
-            pts, hit = back_project(cam, u, v)
-            std_mask[r0:r1] = hit & in_box(pts, rig.standard_box())
-        std_mask &= ~cap.lit_clipped.any(axis=-1)
-        lit_std = _smooth_on(cap.lit, std_mask, sigma)
-        dark_std = None if cap.dark is None else _smooth_on(cap.dark, std_mask, sigma)
-    for r0 in range(0, h, band_rows):
-        r1 = min(r0 + band_rows, h)
-        u, v = np.meshgrid(cols, np.arange(r0, r1, dtype=np.float64))
-        g = pixel_geometry(rig, u, v)
-        inp = g.in_probe
-        probe[r0:r1] = inp
-        if not inp.any():
-            continue
-        muv = g.mirror_pixels[inp]
-        v_std, clip_std = sample_bilinear(lit_std, muv, reduce_max=cap.lit_clipped)
-        v_std_bg = None if dark_std is None else sample_bilinear(dark_std, muv)
-        v_p = cap.lit[r0:r1][inp]
-        v_bg = None if cap.dark is None else cap.dark[r0:r1][inp]
-        fr, fl = reconstruct_brdf(
-            v_p, v_bg, v_std, v_std_bg, cap.rho_standard, on_standard=g.mirror_ok[inp],
-            saturated=cap.lit_clipped[r0:r1][inp] | clip_std, noise_floor=cfg.fit.noise_floor, return_flags=True,
-        )
-        band = f_r[r0:r1]
-        band[inp] = fr
-        flags[r0:r1][inp] = np.bitwise_or.reduce(fl, axis=-1)
-        wi[r0:r1][inp] = to_material_frame(g.wi[inp], tangent)
-        wo[r0:r1][inp] = to_material_frame(g.wo[inp], tangent)
-        xs[r0:r1][inp] = g.points[inp][:, 0]
-        ys[r0:r1][inp] = g.points[inp][:, 1]
+    rec = reconstruct_capture(cap, band_rows=band_rows)
+    f_r, wi, wo, flags, probe = rec.f_r, rec.wi, rec.wo, rec.flags, rec.probe
+    xs, ys = rec.points[..., 0], rec.points[..., 1]
 
     n_probe = int(probe.sum())
     if n_probe == 0:

@@ -22,8 +22,6 @@ import math
 import numpy as np
 
 from ..capture import CAPTURE_FILE, Capture, CaptureError
-from ..geometry import back_project, in_box, pixel_geometry, to_material_frame
-from ..reconstruct import reconstruct_brdf, sample_bilinear
 from ._models import ScanlineData, scanline_data
 
 __all__ = ["capture_data"]
@@ -58,46 +56,14 @@ def capture_data(cap: Capture, *, max_samples: int = 20_000, band_rows: int = 51
     band_rows
         Rows processed at a time.
     """
-    from ..pipeline import _smooth_on
+    from ..pipeline import reconstruct_capture
 
     if cap.method != "scanline":
         raise CaptureError(CAPTURE_FILE, "method", f"diagnose needs method = 'scanline', got {cap.method!r}")
     cfg, rig = cap.config, cap.rig
-    cam = rig.camera
-    h, w = cam.height, cam.width
-    f_r = np.full((h, w, 3), np.nan)
-    wi = np.zeros((h, w, 3))
-    wo = np.zeros((h, w, 3))
-    pts = np.zeros((h, w, 3))
-    probe = np.zeros((h, w), bool)
-    cols = np.arange(w, dtype=np.float64)
-    lit_std, dark_std = cap.lit, cap.dark
-    if cfg.fit.smooth_standard_px > 0:
-        u, v = np.meshgrid(cols, np.arange(h, dtype=np.float64))
-        p, hit = back_project(cam, u, v)
-        std_mask = hit & in_box(p, rig.standard_box()) & ~cap.lit_clipped.any(axis=-1)
-        lit_std = _smooth_on(cap.lit, std_mask, cfg.fit.smooth_standard_px)
-        dark_std = None if cap.dark is None else _smooth_on(cap.dark, std_mask, cfg.fit.smooth_standard_px)
-    for r0 in range(0, h, band_rows):
-        r1 = min(r0 + band_rows, h)
-        u, v = np.meshgrid(cols, np.arange(r0, r1, dtype=np.float64))
-        g = pixel_geometry(rig, u, v)
-        inp = g.in_probe
-        probe[r0:r1] = inp
-        if not inp.any():
-            continue
-        muv = g.mirror_pixels[inp]
-        v_std, clip_std = sample_bilinear(lit_std, muv, reduce_max=cap.lit_clipped)
-        v_std_bg = None if dark_std is None else sample_bilinear(dark_std, muv)
-        fr = reconstruct_brdf(
-            cap.lit[r0:r1][inp], None if cap.dark is None else cap.dark[r0:r1][inp], v_std, v_std_bg,
-            cap.rho_standard, on_standard=g.mirror_ok[inp], saturated=cap.lit_clipped[r0:r1][inp] | clip_std,
-            noise_floor=cfg.fit.noise_floor,
-        )
-        f_r[r0:r1][inp] = fr
-        wi[r0:r1][inp] = to_material_frame(g.wi[inp], cap.tangent)
-        wo[r0:r1][inp] = to_material_frame(g.wo[inp], cap.tangent)
-        pts[r0:r1][inp] = g.points[inp]
+    rec = reconstruct_capture(cap, band_rows=band_rows, dtype=np.float64)
+    f_r, wi, wo, probe = rec.f_r, rec.wi, rec.wo, rec.probe
+    pts = np.nan_to_num(rec.points)
     n_probe = int(probe.sum())
     if n_probe == 0:
         raise CaptureError(CAPTURE_FILE, "camera", "no pixel of the image sees the probe")
