@@ -57,6 +57,9 @@ class Candidate:
         Binned-residual test against the effect's telling covariate, before fitting.
     physical
         Some start converged on the physical side.
+    gap_p_after
+        ``P(χ²_dof ≥ χ²)`` of the model with the effect: small when a
+        significant gap remains (a partial match if it also explains little).
     """
 
     effect: str
@@ -68,10 +71,12 @@ class Candidate:
     structure_p: float
     physical: bool
     state: FitState | None = None
+    gap_p_after: float = math.nan
 
     def as_dict(self) -> dict:
         return {k: _num(getattr(self, k)) for k in
-                ("effect", "k", "delta_chi2", "delta_bic", "p_value", "explained", "structure_p", "physical")}
+                ("effect", "k", "delta_chi2", "delta_bic", "p_value", "explained", "structure_p", "physical",
+                 "gap_p_after")}
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -237,7 +242,8 @@ class DiscoveryReport:
             L.append("\n## Not testable on these data\n")
             L.extend(f"- {n}: {w}" for n, w in self.not_testable)
         L.append(f"\n_Criterion: largest ΔBIC, added if ΔBIC > 0, Bonferroni LR p < {self.settings['alpha']}, and "
-                 f"explaining ≥ {100 * self.settings['min_explained']:.0f} % of the excess. Time {self.seconds:.1f} s._")
+                 f"explaining ≥ {100 * self.settings['min_explained']:.0f} % of the excess or leaving a gap within the "
+                 f"noise. Time {self.seconds:.1f} s._")
         return "\n".join(L) + "\n"
 
     def __str__(self) -> str:
