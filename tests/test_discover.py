@@ -142,6 +142,8 @@ def test_cli_diagnose(tmp_path):
     assert r.exit_code == 0, r.output
     d = json.loads((tmp_path / "rep" / "report.json").read_text())
     assert d["found"] == [] and len(d["gap"]) == 1 and d["capture"]
+    # a clean capture sits at the noise level: the estimated σ is neither too large nor too small
+    assert 0.8 < d["gap"][0] < 1.25, d["gap"]
     assert (tmp_path / "rep" / "report.md").exists() and (tmp_path / "rep" / "gap.png").exists()
     r = CliRunner().invoke(main, ["diagnose", str(tmp_path / "nope"), "--out", str(tmp_path / "rep2")])
     out = " ".join(r.output.split())

@@ -8,11 +8,23 @@ that at most ``max_samples`` pixels per channel enter (as ``fit_capture``
 bins for its fit).
 
 Noise
-    A capture carries no per-pixel σ. It is estimated from the data: along
-    each scanline the differences of neighbouring binned values, ``d``,
-    against their level ``ȳ``; ``E[d²/2] = s0² + s1² ȳ²`` (a floor plus a
-    relative term) is fitted by least squares over all scanlines, per
-    channel. Fine texture of the probe counts as noise by this estimate.
+    A capture carries no per-pixel σ. It is estimated from the data with the
+    difference-based pseudo-residuals of Gasser, Sroka & Jennen-Steinmetz
+    (1986, Biometrika 73, 625): along each scanline::
+
+        ε̃_i = (y_{i−1} − 2 y_i + y_{i+1}) / √6,   E[ε̃_i²] = σ²  (white noise)
+
+    The second difference cancels the signal's level *and* gradient, so the
+    smooth change of the BRDF along a scanline (the highlight's flanks, the
+    diffuse shading) does not count as noise; first differences did, and
+    overestimated σ by ≈ 1.4 on a clean simulated capture (the gap read 0.53
+    instead of ≈ 1). ``ε̃²`` is regressed on the level ``ȳ_i = (y_{i−1} + y_i
+    + y_{i+1})/3`` — uncorrelated with ``ε̃_i`` for white noise, so the
+    regression is unbiased — as ``σ² = s0 + s1 ȳ + s2 ȳ²`` (read floor, shot
+    noise, a relative term), non-negative least squares, per channel.
+    What remains biased upwards: the highlight's curvature where it is sharp
+    on the pixel grid, and fine texture of the probe, which this estimate
+    counts as noise.
 """
 
 from __future__ import annotations
@@ -28,19 +40,37 @@ __all__ = ["capture_data"]
 
 
 def _noise_model(f: np.ndarray) -> np.ndarray:
-    """σ per value from neighbour differences along axis 1, ``σ² = s0² + s1² y²`` per channel."""
-    d = np.diff(f, axis=1)
-    m = 0.5 * (f[:, 1:] + f[:, :-1])
+    """σ per value from second-difference pseudo-residuals along axis 1 (see the module docstring).
+
+    Parameters
+    ----------
+    f
+        ``(S, N, C)`` values along ``S`` scanlines, NaN where missing; a
+        triple with a missing value is skipped.
+
+    Returns
+    -------
+    np.ndarray
+        ``(S, N, C)``: ``σ = √(s0 + s1 f + s2 f²)`` with ``s0, s1, s2 ≥ 0`` fitted
+        per channel to ``ε̃² = (f_{i−1} − 2 f_i + f_{i+1})² / 6`` against the
+        triple's mean.
+    """
+    from scipy.optimize import nnls
+
+    e2 = (f[:, :-2] - 2.0 * f[:, 1:-1] + f[:, 2:]) ** 2 / 6.0
+    lvl = (f[:, :-2] + f[:, 1:-1] + f[:, 2:]) / 3.0
     sig = np.empty_like(f)
     for c in range(f.shape[-1]):
-        ok = np.isfinite(d[..., c]) & np.isfinite(m[..., c])
-        dd, mm = 0.5 * d[..., c][ok] ** 2, m[..., c][ok]
-        if dd.size < 4:
+        ok = np.isfinite(e2[..., c]) & np.isfinite(lvl[..., c])
+        ee, ll = e2[..., c][ok], lvl[..., c][ok]
+        if ee.size < 8:
             raise CaptureError(CAPTURE_FILE, None, "too few neighbouring probe values to estimate the noise")
-        X = np.stack([np.ones_like(mm), mm**2], -1)
-        coef, *_ = np.linalg.lstsq(X, dd, rcond=None)
-        coef = np.maximum(coef, [1e-12 * max(np.mean(dd), 1e-30), 0.0])
-        sig[..., c] = np.sqrt(coef[0] + coef[1] * f[..., c] ** 2)
+        scale = max(float(np.mean(np.abs(ll))), 1e-30)
+        X = np.stack([np.ones_like(ll), ll / scale, (ll / scale) ** 2], -1)
+        coef, _ = nnls(X, ee)
+        coef[0] = max(coef[0], 1e-12 * max(float(np.mean(ee)), 1e-30))
+        fc = np.abs(f[..., c]) / scale
+        sig[..., c] = np.sqrt(coef[0] + coef[1] * fc + coef[2] * fc**2)
     return sig
 
 
