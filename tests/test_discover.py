@@ -163,7 +163,9 @@ def test_discover_rejects_mismatched_inputs():
 def test_full_bench():
     """≥ 10 draws per detectable effect (20 for γ, whose signature the baseline mostly absorbs), ≥ 100 null
     draws, the out-of-library effect, cancelled effects."""
-    s = bench.run_bench(n_draws=10, n_null=100, out_of_library=5, cancelled=2, draws={"gamma": 20})
+    s = bench.run_bench(n_draws=10, n_null=100, out_of_library=5, cancelled=2, draws={"gamma": 20},
+                        progress=lambda i, n, r: print(f"[{i + 1}/{n}] {r['hidden']} → {r['found']} gap "
+                                                       f"{r['gap_before']:.3f} → {r['gap_after']:.3f}", flush=True))
     print(bench.bench_table(s))
     print("named first:", {k: round(v, 3) for k, v in s["named_first"].items()}, "pooled", s["named_first_all"])
     print("null false-addition rate:", s["null_false_rate"], "of", s["n_null"],
