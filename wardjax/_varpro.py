@@ -81,27 +81,35 @@ class Stats(NamedTuple):
 class Prepared(NamedTuple):
     """Per-scanline constants, computed once before the search.
 
-    The sample axis is last (minor) so that XLA vectorises along it. The
-    moment matrices turn every weighted sum the search needs into two small
-    matrix–vector products with ``e = exp(−u/αx² − v/αy²)`` and ``e²``:
-    ``m1 = [g w φ, g w f̃ φ]`` over ``φ ∈ Φ₁`` and ``m2 = g² w φ`` over
-    ``φ ∈ Φ₂``, with ``Φ₁ = (1, t)``, ``Φ₂ = (1, t, t²)`` (isotropic,
-    ``t = u + v``) or ``Φ₁ = (1, u, v)``, ``Φ₂ = (1, u, v, u², uv, v²)``.
+    The sample axis is last (minor) so that XLA vectorises along it. Every
+    weighted sum the search needs is a product of one of a few per-sample
+    streams with ``e = exp(−u/αx² − v/αy²)`` or ``e²`` times a low power of
+    the geometry ``x`` (``t = u + v``, or ``u`` and ``v``), formed on the fly:
+
+    * ``gw[c] = g w_c`` per weight column (for ``Σwb`` and its derivatives,
+      needed per column because of the centring),
+    * ``gwf = g Σ_c w_c f̃_c`` and ``g2w = m g² Σ_c w_c`` summed over the
+      channels (``⟨b, f̃⟩`` and ``⟨b, b⟩`` only ever appear summed).
+
+    Six streams (isotropic RGB) instead of a 21-row moment matrix: the search
+    is bound by memory traffic, not by arithmetic.
     """
 
-    u: Array  # (N,)
-    v: Array  # (N,)
-    w: Array  # (C, N) weights, 0 where invalid
-    ft: Array  # (C, N) weighted-centred data (channel-summed when C == 1)
+    x: Array  # (K, N) t = u + v (isotropic, K = 1) or (u, v) (K = 2)
+    gw: Array  # (C, N) g w per weight column, 0 where invalid
+    gwf: Array  # (N,) g Σ_c w_c f̃_c
+    g2w: Array  # (N,) m g² Σ_c w_c
     wsum: Array  # (C,) Σ w (1 where there is none, to keep divisions finite)
     fbar: Array  # (3,) per-channel weighted mean of f
     k0: Array  # () Σ w f̃² over channels
     channels_ok: Array  # () every weight column has some weight
     has: Array  # (C,) this weight column has some weight
-    m1: Array  # (2, C, P1, N)
-    m2: Array  # (C, P2, N)
-    grid_m1: Array  # (2, C, Ng) the φ = 1 rows of m1 on a subsample, for the grid
-    grid_m2: Array  # (C, Ng)
+    n_obs: Array  # () values with weight > 0 (over channels)
+    n_samples: Array  # () samples with weight > 0 in some channel
+    theta_guess: Array  # () log of the data-driven α guess (:func:`initial_alpha`)
+    grid_gw: Array  # (C, Ng) gw on a subsample, for the grid
+    grid_gwf: Array  # (Ng,)
+    grid_g2w: Array  # (Ng,)
     grid_x: Array  # (Ng,) t on the subsample
     grid_wsum: Array  # (C,)
     grid_fsum: Array  # (C,) Σ w f̃ on the subsample (not 0: centred on all samples)
@@ -109,20 +117,21 @@ class Prepared(NamedTuple):
     @property
     def mult(self) -> float:
         """``m = 3 / C``: how many channels share one weight column."""
-        return 3.0 / self.w.shape[-2]
+        return 3.0 / self.gw.shape[-2]
 
 
 GRID_MIN_SAMPLES = 64
 
 
 def prepare(f, u, v, g, w, iso: bool = True) -> Prepared:
-    """Centre the data and build the moment matrices of one scanline.
+    """Centre the data and build the per-sample streams of one scanline.
 
     ``f`` (N, 3), ``u, v, g`` (N,), ``w`` (N, C) with invalid samples already
     at weight 0 and ``f`` finite there.
     """
     c = w.shape[-1]
     n = f.shape[0]
+    m = 3.0 / c
     f = f.T  # (3, N)
     w = w.T  # (C, N)
     wsum = jnp.sum(w, axis=-1)
@@ -132,27 +141,23 @@ def prepare(f, u, v, g, w, iso: bool = True) -> Prepared:
     fbar = jnp.sum(w * f, axis=-1) / wsum  # (3,); w and wsum broadcast when C == 1
     fc = f - fbar[:, None]
     k0 = jnp.sum(w * fc * fc)
-    ft = jnp.sum(fc, axis=0, keepdims=True) if c == 1 else fc
+    ft = jnp.sum(fc, axis=0, keepdims=True) if c == 1 else fc  # (C, N)
     gw = g[None, :] * w  # (C, N)
-    if iso:
-        t = u + v
-        phi1 = jnp.stack([jnp.ones_like(t), t])
-        phi2 = jnp.stack([jnp.ones_like(t), t, t * t])
-    else:
-        one = jnp.ones_like(u)
-        phi1 = jnp.stack([one, u, v])
-        phi2 = jnp.stack([one, u, v, u * u, u * v, v * v])
-    m1 = jnp.stack([gw[:, None, :] * phi1[None], (gw * ft)[:, None, :] * phi1[None]])
-    m2 = (gw * g[None, :])[:, None, :] * phi2[None]
+    gwf = g * jnp.sum(w * fc, axis=0)
+    g2w = (m * g * g) * jnp.sum(w, axis=0)
+    t = u + v
+    x = t[None, :] if iso else jnp.stack([u, v])
+    valid = jnp.sum(w, axis=0) > 0
+    n_obs = jnp.sum(jnp.broadcast_to(w, (3, w.shape[-1])) > 0)
+    n_samples = jnp.sum(valid)
+    theta_guess = jnp.log(initial_alpha(jnp.sum(ft, axis=0), t, valid))
     stride = max(1, n // GRID_MIN_SAMPLES)
     sub = slice(0, None, stride)
-    grid_m1 = jnp.stack([gw[:, sub], (gw * ft)[:, sub]])
-    grid_m2 = (gw * g[None, :])[:, sub]
     grid_wsum = jnp.sum(w[:, sub], axis=-1)
     grid_wsum = jnp.where(grid_wsum > 0, grid_wsum, 1.0)
     grid_fsum = jnp.sum((w * ft)[:, sub], axis=-1)
-    return Prepared(u, v, w, ft, wsum, fbar, k0, channels_ok, has, m1, m2,
-                    grid_m1, grid_m2, (u + v)[sub], grid_wsum, grid_fsum)
+    return Prepared(x, gw, gwf, g2w, wsum, fbar, k0, channels_ok, has, n_obs, n_samples, theta_guess,
+                    gw[:, sub], gwf[sub], g2w[sub], t[sub], grid_wsum, grid_fsum)
 
 
 def basis(theta, u, v, g, iso: bool):
@@ -171,9 +176,16 @@ def basis(theta, u, v, g, iso: bool):
 
 
 def _profile(bsum, qsum, psum, wsum, fsum, m, k0):
-    """Profiled ``s``, χ² and the centred sums from raw ``Σwb``, ``Σwb²``, ``Σw f̃ b`` (per column)."""
-    sbb = m * jnp.sum(qsum - bsum * bsum / wsum)
-    sbf = jnp.sum(psum - fsum * bsum / wsum)
+    """Profiled ``s``, χ² and the centred sums.
+
+    ``bsum`` (C,) is ``Σwb`` per weight column, ``qsum`` () the channel total
+    ``m Σ_c Σ w_c b²``, ``psum`` () the channel total ``Σ_c Σ w_c f̃_c b`` and
+    ``fsum`` (C,) ``Σ w f̃`` per column (0 over all samples, where the data are
+    centred): ``⟨b̃, b̃⟩ = qsum − m Σ_c (Σwb)²/Σw`` and
+    ``⟨b̃, f̃⟩ = psum − Σ_c Σwf̃ Σwb / Σw``.
+    """
+    sbb = qsum - m * jnp.sum(bsum * bsum / wsum)
+    sbf = psum - jnp.sum(fsum * bsum / wsum)
     ok = sbb > 0
     s = jnp.where(ok, jnp.maximum(sbf, 0.0) / jnp.where(ok, sbb, 1.0), 0.0)
     chi2 = k0 - s * (2.0 * sbf - s * sbb)
@@ -184,63 +196,70 @@ def grid_chi2(theta, p: Prepared):
     """Profiled χ² (up to a constant) of the isotropic model on the grid subsample."""
     inv = jnp.exp(-2.0 * theta)
     e = jnp.exp(-p.grid_x * inv)
-    bsum = inv * jnp.sum(p.grid_m1[0] * e[None, :], axis=-1)
-    psum = inv * jnp.sum(p.grid_m1[1] * e[None, :], axis=-1)
-    qsum = inv * inv * jnp.sum(p.grid_m2 * (e * e)[None, :], axis=-1)
+    bsum = inv * jnp.sum(p.grid_gw * e[None, :], axis=-1)
+    psum = inv * jnp.sum(p.grid_gwf * e)
+    qsum = inv * inv * jnp.sum(p.grid_g2w * (e * e))
     return _profile(bsum, qsum, psum, p.grid_wsum, p.grid_fsum, p.mult, 0.0)[1]
 
 
 def stats(theta, p: Prepared, iso: bool, with_jac: bool = True) -> Stats:
     """Profiled χ², ``s`` and the Kaufman normal equations at ``θ``.
 
-    One exponential per sample, then the moment products (see
-    :class:`Prepared`): ``Σwb = q Σ(gw)e``, ``Σwb² = q² Σ(g²w)e²``,
-    ``Σw f̃ b = q Σ(gw f̃)e`` with ``q = 1/(αx αy)``, and their ``∂/∂θ``
-    companions through ``∂b/∂θ = b c``, ``c`` linear in ``Φ₁``. Centring is
-    algebraic: ``⟨b̃, b̃⟩ = m Σ_c (Σwb² − (Σwb)²/Σw)``.
+    One exponential per sample, then weighted sums of the streams of
+    :class:`Prepared` against ``e`` and ``e²`` times powers of the geometry:
+    ``Σwb = q Σ gw e``, ``m Σwb² = q² Σ g2w e²``, ``Σw f̃ b = q Σ gwf e``
+    with ``q = 1/(αx αy)``, and their ``∂/∂θ`` companions through
+    ``∂b/∂θ = b c`` with ``c`` linear in the geometry (``c = 2t/α² − 2``, or
+    ``c_x = 2u/αx² − 1``, ``c_y = 2v/αy² − 1``). Centring is algebraic (see
+    :func:`_profile`).
     """
+    k = 1 if iso else 2
     if iso:
         inv = jnp.exp(-2.0 * theta[0])
-        e = jnp.exp(-(p.u + p.v) * inv)
+        t = p.x[0]
+        e = jnp.exp(-t * inv)
         q = inv
     else:
         ix = jnp.exp(-2.0 * theta[0])
         iy = jnp.exp(-2.0 * theta[1])
-        e = jnp.exp(-(p.u * ix + p.v * iy))
+        u, v = p.x[0], p.x[1]
+        e = jnp.exp(-(u * ix + v * iy))
         q = jnp.exp(-theta[0] - theta[1])
-    s1 = jnp.sum(p.m1 * e[None, None, None, :], axis=-1)  # (2, C, P1)
-    s2 = jnp.sum(p.m2 * (e * e)[None, None, :], axis=-1)  # (C, P2)
-    bsum, psum, qsum = q * s1[0, :, 0], q * s1[1, :, 0], q * q * s2[:, 0]
-    zero_f = jnp.zeros_like(bsum)
-    s, chi2, sbf, sbb, ok = _profile(bsum, qsum, psum, p.wsum, zero_f, p.mult, p.k0)
-    bbar = bsum / p.wsum
-    k = 1 if iso else 2
+    e2 = e * e
+    bsum = q * jnp.sum(p.gw * e[None, :], axis=-1)  # (C,)
+    psum = q * jnp.sum(p.gwf * e)
+    qsum = q * q * jnp.sum(p.g2w * e2)
     c_ = bsum.shape[0]
+    s, chi2, sbf, sbb, ok = _profile(bsum, qsum, psum, p.wsum, jnp.zeros_like(bsum), p.mult, p.k0)
+    bbar = bsum / p.wsum
     if not with_jac:
         z = jnp.zeros((k,), chi2.dtype)
         zz = jnp.zeros((k, k), chi2.dtype)
         return Stats(chi2, s, sbf, sbb, zz, z, z, zz, bbar, jnp.zeros((c_, k), chi2.dtype))
+    bs = lambda y: jnp.sum(p.gw * (e * y)[None, :], axis=-1)  # noqa: E731  (C,)
+    ps = lambda y: jnp.sum(p.gwf * e * y)  # noqa: E731
+    qs = lambda y: jnp.sum(p.g2w * e2 * y)  # noqa: E731
+    b0, p0, q0 = bsum / q, psum / q, qsum / (q * q)
     if iso:
-        # c = 2 t/α² − 2
-        bp = q * (2 * inv * s1[0, :, 1] - 2 * s1[0, :, 0])[:, None]  # (C, 1)
-        pp = q * (2 * inv * s1[1, :, 1] - 2 * s1[1, :, 0])[:, None]
-        qp = q * q * (2 * inv * s2[:, 1] - 2 * s2[:, 0])[:, None]
-        rp = (q * q * (4 * inv * inv * s2[:, 2] - 8 * inv * s2[:, 1] + 4 * s2[:, 0]))[:, None, None]
+        qt = qs(t)
+        bp = q * (2 * inv * bs(t) - 2 * b0)[:, None]  # (C, 1)
+        pp = q * (2 * inv * ps(t) - 2 * p0)[None]  # (1,)
+        qp = q * q * (2 * inv * qt - 2 * q0)[None]
+        rp = (q * q * (4 * inv * inv * qs(t * t) - 8 * inv * qt + 4 * q0))[None, None]
     else:
-        # c_x = 2u/αx² − 1, c_y = 2v/αy² − 1
-        bp = q * jnp.stack([2 * ix * s1[0, :, 1] - s1[0, :, 0], 2 * iy * s1[0, :, 2] - s1[0, :, 0]], -1)
-        pp = q * jnp.stack([2 * ix * s1[1, :, 1] - s1[1, :, 0], 2 * iy * s1[1, :, 2] - s1[1, :, 0]], -1)
-        qp = q * q * jnp.stack([2 * ix * s2[:, 1] - s2[:, 0], 2 * iy * s2[:, 2] - s2[:, 0]], -1)
-        rxx = 4 * ix * ix * s2[:, 3] - 4 * ix * s2[:, 1] + s2[:, 0]
-        ryy = 4 * iy * iy * s2[:, 5] - 4 * iy * s2[:, 2] + s2[:, 0]
-        rxy = 4 * ix * iy * s2[:, 4] - 2 * ix * s2[:, 1] - 2 * iy * s2[:, 2] + s2[:, 0]
-        rp = q * q * jnp.stack([jnp.stack([rxx, rxy], -1), jnp.stack([rxy, ryy], -1)], -2)  # (C, 2, 2)
+        qu, qv = qs(u), qs(v)
+        bp = q * jnp.stack([2 * ix * bs(u) - b0, 2 * iy * bs(v) - b0], -1)  # (C, 2)
+        pp = q * jnp.stack([2 * ix * ps(u) - p0, 2 * iy * ps(v) - p0])
+        qp = q * q * jnp.stack([2 * ix * qu - q0, 2 * iy * qv - q0])
+        rxx = 4 * ix * ix * qs(u * u) - 4 * ix * qu + q0
+        ryy = 4 * iy * iy * qs(v * v) - 4 * iy * qv + q0
+        rxy = 4 * ix * iy * qs(u * v) - 2 * ix * qu - 2 * iy * qv + q0
+        rp = q * q * jnp.stack([jnp.stack([rxx, rxy]), jnp.stack([rxy, ryy])])  # (2, 2)
     m, wsum = p.mult, p.wsum
-    spb = m * jnp.sum(qp - bsum[:, None] * bp / wsum[:, None], axis=0)
-    spf = jnp.sum(pp, axis=0)
-    spp = m * jnp.sum(rp - bp[:, :, None] * bp[:, None, :] / wsum[:, None, None], axis=0)
+    spb = qp - m * jnp.sum(bsum[:, None] * bp / wsum[:, None], axis=0)
+    spp = rp - m * jnp.sum(bp[:, :, None] * bp[:, None, :] / wsum[:, None, None], axis=0)
     jtj = s * s * (spp - jnp.outer(spb, spb) / jnp.where(ok, sbb, 1.0))
-    jtr = -s * (spf - s * spb)
+    jtr = -s * (pp - s * spb)
     return Stats(chi2, s, sbf, sbb, jtj, jtr, spb, spp, bbar, bp / wsum[:, None])
 
 
@@ -257,20 +276,18 @@ def _solve_small(a, b):
     return jnp.where(ok, jnp.stack([x0, x1]), 0.0)
 
 
-def initial_alpha(p: Prepared) -> Array:
+def initial_alpha(y, t, valid) -> Array:
     """Data-driven guess of ``α``: the half-maximum width of the peak above the floor.
 
-    For a lobe ``exp(−t/α²)`` the excess over the floor halves where
-    ``t − t_peak = α² ln 2``; ``t = tan²δ``. The floor is the smallest
-    weighted-channel-mean value. Returns a value inside the search range.
+    ``y`` (N,) is the channel-summed centred data, ``t = tan²δ`` (N,),
+    ``valid`` (N,) where a sample has weight. For a lobe ``exp(−t/α²)`` the
+    excess over the floor halves where ``t − t_peak = α² ln 2``. The floor is
+    the smallest valid value. Returns a value inside the search range.
     """
-    valid = jnp.sum(p.w, axis=0) > 0
-    y = jnp.sum(p.ft, axis=0)
     big = jnp.asarray(jnp.finfo(y.dtype).max, y.dtype)
     floor = jnp.min(jnp.where(valid, y, big))
     excess = jnp.where(valid, y - floor, 0.0)
     peak = jnp.argmax(excess)
-    t = p.u + p.v
     half = excess >= 0.5 * excess[peak]
     spread = jnp.max(jnp.where(half & valid, t, -big)) - t[peak]
     alpha = jnp.sqrt(jnp.maximum(spread, 0.0) / jnp.log(2.0))
@@ -285,7 +302,7 @@ def grid_start(p: Prepared) -> Array:
     is taken unconditionally when the curvature is positive (it is the
     minimum of the local quadratic model), clipped to one grid step.
     """
-    centre = jnp.log(initial_alpha(p))
+    centre = p.theta_guess
     offsets = (jnp.arange(GRID_POINTS, dtype=centre.dtype) - (GRID_POINTS - 1) / 2) * GRID_STEP
     lo, hi = math.log(ALPHA_MIN), math.log(ALPHA_MAX)
     thetas = jnp.clip(centre + offsets, lo, hi)
@@ -410,9 +427,8 @@ def solve_scanline(p: Prepared, *, iso: bool, rtol: float) -> ScanlineSolution:
         theta, st = lm(theta, p, False, ISO_STEPS + ANISO_STEPS, rtol)
     k = theta.shape[0]
     n_par = 4 + k
-    n_obs = jnp.sum(jnp.broadcast_to(p.w, (3,) + p.w.shape[1:]) > 0)
-    n_samples = jnp.sum(jnp.sum(p.w, axis=0) > 0)
-    dof = n_obs - n_par
+    n_samples = p.n_samples
+    dof = p.n_obs - n_par
     s = st.s
     rho_d = jnp.pi * (p.fbar - s * jnp.broadcast_to(st.bbar, (3,)))
     scale = st.chi2 / jnp.maximum(dof, 1)
