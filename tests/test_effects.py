@@ -158,3 +158,27 @@ def test_capture_noise_estimate_ignores_the_signal_gradient():
     np.testing.assert_allclose(ratio, 1.0, atol=0.05)
     ok = np.isfinite(f)
     assert abs(np.mean(((f - f0)[ok] / est[ok]) ** 2) - 1.0) < 0.05
+
+
+def test_flagged_clipped_values_are_censored_not_dropped():
+    """Saturated values the sensor flags are fitted with the censored likelihood: without the lamp geometry
+    the clip level varies along the scanlines and no plateau of ties shows, yet the flags name it."""
+    from wardjax.effects import discover
+
+    case = bench.simulate_case("saturation", 3, n_scanlines=6, n_samples=128)
+    d = case.data
+    sat = get_effect("saturation")
+    with jax.enable_x64(True):  # the values clipped in the simulation (ties of y r²/cos θi)
+        flags = np.asarray(sat.censored(True, d))
+    assert 50 < flags.sum() < 0.2 * d.n_obs
+    y = np.where(np.asarray(d.mask), np.asarray(d.y), np.nan)
+    bare = scanline_data(y, d.wi, d.wo, d.sigma, kind="ratio")
+    assert "plateau" in sat.applicable(bare)
+    flagged = scanline_data(y, d.wi, d.wo, d.sigma, kind="ratio", censored=flags)
+    assert sat.applicable(flagged) is None
+    rep = discover(ScanlineModel(), flagged, keep_plot_data=False)
+    assert rep.found[:1] == ["saturation"] and rep.gap[-1] < 1.1 < rep.gap[0]
+    a = rep.final.values["model"]["alpha"]
+    assert abs(a / case.truth["alpha"] - 1) < 0.05
+    with pytest.raises(ValueError, match="censored must have shape"):
+        scanline_data(y, d.wi, d.wo, d.sigma, censored=flags[:, :5])

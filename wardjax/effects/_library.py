@@ -73,15 +73,20 @@ class Saturation(_ScanlineEffect):
     paper names it as a limitation of the method (section 4.1: "artifacts due
     to saturation of the camera").
 
-    Fit: observations whose ``y / (r²/cos θi)`` ties with the channel maximum
-    are *censored*: they say only ``value ≥ y``, and contribute
-    ``−2 log Φ((f − y)/σ)`` to the deviance instead of ``((y − f)/σ)²``.
-    The clip level is estimated from the data (the maximum), counted as one
-    parameter per channel in the evidence.
+    Fit: the clipped observations are *censored*: they say only
+    ``value ≥ y``, and contribute ``−2 log Φ((f − y)/σ)`` to the deviance
+    instead of ``((y − f)/σ)²`` (the censored, Tobit, likelihood), so a
+    clipped highlight still bounds ρs and α from below rather than being
+    dropped. Which values are clipped: the data's ``censored`` flags where
+    the sensor reports them (:func:`~wardjax.effects.scanline_data`), else
+    the values whose ``y / (r²/cos θi)`` ties with the channel maximum, the
+    clip level then estimated from the data (the maximum), counted as one
+    parameter in the evidence either way.
 
     Signature: negative residuals of the unclipped model at the highest
-    predicted intensities, and a plateau of tied maxima (it is only tested
-    when at least three values tie at a channel's maximum).
+    predicted intensities, and clipped values (it is only tested when the
+    data flag some as censored, or at least three tie at a channel's
+    maximum).
     """
 
     name = "saturation"
@@ -101,6 +106,10 @@ class Saturation(_ScanlineEffect):
         why = super().applicable(data)
         if why:
             return why
+        if data.censored is not None:
+            if np.any(np.asarray(data.censored)):
+                return None
+            return "no value is flagged as clipped"
         z = np.asarray(self._z(data))
         m = np.asarray(data.mask)
         zm = np.where(m, z, -np.inf)
@@ -111,6 +120,8 @@ class Saturation(_ScanlineEffect):
         return None
 
     def censored(self, active, data):
+        if data.censored is not None:
+            return active & data.mask & data.censored
         z = self._z(data)
         zm = jnp.where(data.mask, z, -jnp.inf)
         top = jnp.max(zm, axis=(0, 1), keepdims=True)

@@ -73,6 +73,12 @@ class ScanlineData(eqx.Module):
         stripline cancel) or ``"brdf"`` (calibrated BRDF values).
     f_std
         ``ρ_std/π`` of the reflectance standard (the ratio's reference level).
+    censored
+        ``(S, N, C)`` bool or ``None``: the value is known to be clipped — a
+        *lower bound* on the true value (a saturated pixel whose clip level
+        the sensor reports). The saturation effect fits these with the
+        censored likelihood; without the flags it finds clipped values as a
+        plateau of tied maxima.
     """
 
     y: np.ndarray
@@ -81,6 +87,7 @@ class ScanlineData(eqx.Module):
     wi: np.ndarray
     wo: np.ndarray
     cov: dict
+    censored: np.ndarray | None = None
     kind: str = eqx.field(static=True, default="ratio")
     f_std: float = eqx.field(static=True, default=0.99 / np.pi)
     available: tuple = eqx.field(static=True, default=())
@@ -105,6 +112,7 @@ def scanline_data(
     lamp=None,
     kind: str = "ratio",
     rho_standard: float = 0.99,
+    censored=None,
 ) -> ScanlineData:
     """Build :class:`ScanlineData` from arrays, checking shapes at the boundary.
 
@@ -128,6 +136,10 @@ def scanline_data(
         ``"ratio"`` or ``"brdf"`` (see :class:`ScanlineData`).
     rho_standard
         Reflectance of the standard (the paper's BaSO₄, ≈ 0.99).
+    censored
+        Optional ``(S, N)`` or ``(S, N, C)`` bool: ``f_r`` there is a lower
+        bound (clipped at a known level), to be fitted with the censored
+        likelihood rather than dropped (see :class:`ScanlineData`).
     """
     f = np.asarray(f_r, np.float64)
     if f.ndim == 2:
@@ -165,11 +177,18 @@ def scanline_data(
             w = r2 / np.maximum(wi[..., 2], 1e-6)
             any_m = m.any(-1)
             cov["inv_irradiance"] = w / np.mean(w[any_m])
+    cens = None
+    if censored is not None:
+        ck = np.asarray(censored, bool)
+        ck = ck[..., None] if ck.ndim == 2 else ck
+        if ck.shape[:2] != (s, n) or ck.shape[-1] not in (1, c):
+            raise ValueError(f"censored must have shape {(s, n)} or {(s, n, c)}, got {np.shape(censored)}")
+        cens = np.broadcast_to(ck, f.shape) & m
     f = np.where(m, f, 0.0)
     sig = np.where(m, sig, 1.0)
     avail = tuple(sorted(cov)) + (("rgb",) if c == 3 else ())
     # NumPy float64 leaves: they become float64 JAX arrays inside the fits' scoped x64
-    return ScanlineData(y=f, sigma=sig, mask=m, wi=wi, wo=wo, cov=cov, kind=kind,
+    return ScanlineData(y=f, sigma=sig, mask=m, wi=wi, wo=wo, cov=cov, censored=cens, kind=kind,
                         f_std=float(rho_standard) / np.pi, available=avail)
 
 
