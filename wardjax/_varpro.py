@@ -195,10 +195,10 @@ def _profile(bsum, qsum, psum, wsum, fsum, m, k0):
 def grid_chi2(theta, p: Prepared):
     """Profiled χ² (up to a constant) of the isotropic model on the grid subsample."""
     inv = jnp.exp(-2.0 * theta)
-    e = jnp.exp(-p.grid_x * inv)
-    bsum = inv * jnp.sum(p.grid_gw * e[None, :], axis=-1)
-    psum = inv * jnp.sum(p.grid_gwf * e)
-    qsum = inv * inv * jnp.sum(p.grid_g2w * (e * e))
+    e = jax.lax.optimization_barrier(jnp.exp(-p.grid_x * inv))  # see stats()
+    bsum = inv * (p.grid_gw @ e)
+    psum = inv * (p.grid_gwf @ e)
+    qsum = inv * inv * (p.grid_g2w @ (e * e))
     return _profile(bsum, qsum, psum, p.grid_wsum, p.grid_fsum, p.mult, 0.0)[1]
 
 
@@ -225,10 +225,16 @@ def stats(theta, p: Prepared, iso: bool, with_jac: bool = True) -> Stats:
         u, v = p.x[0], p.x[1]
         e = jnp.exp(-(u * ix + v * iy))
         q = jnp.exp(-theta[0] - theta[1])
+    # The barrier makes XLA compute e once, in its own vectorised loop,
+    # instead of re-deriving it inside every sum that reads it; the sums are
+    # dot products, which XLA:CPU vectorises (a fused multiply-reduce runs as
+    # one serial chain of adds). Measured per evaluation of 1,024 scanlines:
+    # 2.6 → 1.1 ms in float32, 3.9 → 2.7 ms in float64.
+    e = jax.lax.optimization_barrier(e)
     e2 = e * e
-    bsum = q * jnp.sum(p.gw * e[None, :], axis=-1)  # (C,)
-    psum = q * jnp.sum(p.gwf * e)
-    qsum = q * q * jnp.sum(p.g2w * e2)
+    bsum = q * (p.gw @ e)  # (C,)
+    psum = q * (p.gwf @ e)
+    qsum = q * q * (p.g2w @ e2)
     c_ = bsum.shape[0]
     s, chi2, sbf, sbb, ok = _profile(bsum, qsum, psum, p.wsum, jnp.zeros_like(bsum), p.mult, p.k0)
     bbar = bsum / p.wsum
@@ -236,9 +242,9 @@ def stats(theta, p: Prepared, iso: bool, with_jac: bool = True) -> Stats:
         z = jnp.zeros((k,), chi2.dtype)
         zz = jnp.zeros((k, k), chi2.dtype)
         return Stats(chi2, s, sbf, sbb, zz, z, z, zz, bbar, jnp.zeros((c_, k), chi2.dtype))
-    bs = lambda y: jnp.sum(p.gw * (e * y)[None, :], axis=-1)  # noqa: E731  (C,)
-    ps = lambda y: jnp.sum(p.gwf * e * y)  # noqa: E731
-    qs = lambda y: jnp.sum(p.g2w * e2 * y)  # noqa: E731
+    bs = lambda y: p.gw @ (e * y)  # noqa: E731  (C,)
+    ps = lambda y: p.gwf @ (e * y)  # noqa: E731
+    qs = lambda y: p.g2w @ (e2 * y)  # noqa: E731
     b0, p0, q0 = bsum / q, psum / q, qsum / (q * q)
     if iso:
         qt = qs(t)
