@@ -112,3 +112,28 @@ def test_camera_validation():
         Camera((0, 0, 1), (0, 0, 1), 100.0, (10, 10)).axes()
     with pytest.raises(ValueError, match="parallel"):
         Camera((0, 0, 1), (0, 0, 0), 100.0, (10, 10)).axes()
+
+
+@pytest.mark.parametrize("dtype, tol_mm, tol_px", [(np.float64, 1e-9, 1e-9), (np.float32, 2e-3, 2e-3)])
+def test_band_geometry_is_pixel_geometry(dtype, tol_mm, tol_px):
+    # The fused, compiled band kernel computes what pixel_geometry + to_material_frame do.
+    from wardjax.geometry import band_geometry
+
+    rig = Rig(lamp=(0.0, 300.0, 400.0), camera=OBLIQUE, probe=(3.0, 120.0, -150.0, 150.0),
+              standard=(-120.0, -3.0, -150.0, 150.0))
+    rows = np.arange(0, 301, 7)
+    u, v = np.meshgrid(np.arange(401, dtype=float), rows.astype(float))
+    ref = pixel_geometry(rig, u, v)
+    got = band_geometry(rig, rows, tangent=(0.6, 0.8), dtype=dtype)
+    assert got.points.dtype == dtype
+    hit = np.isfinite(ref.points[..., 0])
+    np.testing.assert_array_equal(np.isfinite(got.points[..., 0]), hit)
+    np.testing.assert_allclose(got.points[hit], ref.points[hit], atol=tol_mm)
+    for name in ("wi", "wo"):
+        want = np.where(hit[..., None], to_material_frame(getattr(ref, name), (0.6, 0.8)), 0.0)
+        np.testing.assert_allclose(getattr(got, name), want, atol=10 * np.finfo(dtype).eps)
+    for name in ("in_probe", "in_standard", "mirror_ok"):
+        np.testing.assert_array_equal(getattr(got, name), getattr(ref, name), err_msg=name)
+    ok = ref.mirror_ok
+    assert ok.sum() > 1000
+    np.testing.assert_allclose(got.mirror_pixels[ok], ref.mirror_pixels[ok], atol=tol_px)
