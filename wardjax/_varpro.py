@@ -126,14 +126,11 @@ GRID_MIN_SAMPLES = 64
 def prepare(f, u, v, g, w, iso: bool = True) -> Prepared:
     """Centre the data and build the per-sample streams of one scanline.
 
-    ``f`` (N, 3), ``u, v, g`` (N,), ``w`` (N, C) with invalid samples already
-    at weight 0 and ``f`` finite there.
+    ``f`` (3, N), ``u, v, g`` (N,), ``w`` (C, N) (sample axis last) with
+    invalid samples already at weight 0 and ``f`` finite there.
     """
-    c = w.shape[-1]
-    n = f.shape[0]
+    c, n = w.shape
     m = 3.0 / c
-    f = f.T  # (3, N)
-    w = w.T  # (C, N)
     wsum = jnp.sum(w, axis=-1)
     has = wsum > 0
     channels_ok = jnp.all(has)
@@ -148,8 +145,9 @@ def prepare(f, u, v, g, w, iso: bool = True) -> Prepared:
     t = u + v
     x = t[None, :] if iso else jnp.stack([u, v])
     valid = jnp.sum(w, axis=0) > 0
-    n_obs = jnp.sum(jnp.broadcast_to(w, (3, w.shape[-1])) > 0)
-    n_samples = jnp.sum(valid)
+    # Counted in floating point: an int64 count is a slow path in XLA:CPU.
+    n_obs = (m * jnp.sum((w > 0).astype(w.dtype))).astype(jnp.int32)
+    n_samples = jnp.sum(valid.astype(w.dtype)).astype(jnp.int32)
     theta_guess = jnp.log(initial_alpha(jnp.sum(ft, axis=0), t, valid))
     stride = max(1, n // GRID_MIN_SAMPLES)
     sub = slice(0, None, stride)
@@ -419,7 +417,7 @@ def prepare_scanline(f, wi, wo, w, *, iso: bool, normalization: str) -> Prepared
     """Geometry and moments of one scanline (stage A, vmapped over a chunk)."""
     geom = ward_geometry(wi, wo, normalization)
     w = jnp.where(geom.valid[:, None], w, 0.0)
-    return prepare(f, geom.u, geom.v, geom.g, w, iso)
+    return prepare(f.T, geom.u, geom.v, geom.g, w.T, iso)
 
 
 def solve_scanline(p: Prepared, *, iso: bool, rtol: float) -> ScanlineSolution:

@@ -273,7 +273,9 @@ def _clean(f, wi, wo, mask, weights, dtype):
 def _geometry_chunk(f, wi, wo, mask, weights, *, normalization, dtype):
     f, wi, wo, w = _clean(f, wi, wo, mask, weights, dtype)
     geom = ward_geometry(wi, wo, normalization)
-    return f, geom.u, geom.v, geom.g, jnp.where(geom.valid[..., None], w, 0.0)
+    w = jnp.where(geom.valid[..., None], w, 0.0)
+    # Sample axis last for the kernel: the transposes fuse into this pass.
+    return jnp.swapaxes(f, -1, -2), geom.u, geom.v, geom.g, jnp.swapaxes(w, -1, -2)
 
 
 @functools.partial(jax.jit, static_argnames=("iso",))
@@ -436,7 +438,7 @@ def _optimistix_scanline(f, wi, wo, w, normalization):
     """Reference fit of one scanline with optimistix's LM (same start as the fast path)."""
     geom = ward_geometry(wi, wo, normalization)
     w = jnp.where(geom.valid[:, None], w, 0.0)
-    p = _varpro.prepare(f, geom.u, geom.v, geom.g, w)
+    p = _varpro.prepare(f.T, geom.u, geom.v, geom.g, w.T)
     theta0 = _varpro.grid_start(p)
     st = _varpro.stats(theta0, p, True, with_jac=False)
     rho_d0 = jnp.pi * (p.fbar - st.s * jnp.broadcast_to(st.bbar, (3,)))
