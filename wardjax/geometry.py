@@ -326,7 +326,7 @@ class BandGeometry(NamedTuple):
     mirror_ok: np.ndarray
 
 
-def _rig_constants(rig: Rig, tangent) -> np.ndarray:
+def rig_constants(rig: Rig, tangent) -> np.ndarray:
     """The rig as one float64 vector for the compiled kernel (27 numbers)."""
     cam = rig.camera
     t = np.asarray(tangent, np.float64)
@@ -339,9 +339,11 @@ def _jnp_in_box(x, y, box):
     return (x >= box[0]) & (x <= box[1]) & (y >= box[2]) & (y <= box[3])
 
 
-@functools.partial(jax.jit, static_argnames=("width", "height"))
-def _band_kernel(k, rows, *, width: int, height: int):
-    """Fused :func:`pixel_geometry` + :func:`to_material_frame` for whole rows (dtype of ``k``)."""
+def band_geometry_jnp(k, rows, *, width: int, height: int):
+    """:func:`pixel_geometry` + :func:`to_material_frame` of whole rows in ``jnp`` (traceable; dtype of ``k``).
+
+    ``k`` is :func:`rig_constants`; returns the fields of :class:`BandGeometry`.
+    """
     axes, c = k[0:9].reshape(3, 3), k[9:12]
     fx, fy, cx, cy = k[12], k[13], k[14], k[15]
     lamp, probe, std, t = k[16:19], k[19:23], k[23:27], k[27:29]
@@ -380,6 +382,9 @@ def _band_kernel(k, rows, *, width: int, height: int):
     return pts, wi, wo, in_probe, in_std, jnp.stack([mu, mv], -1), mirror_ok
 
 
+_band_kernel = jax.jit(band_geometry_jnp, static_argnames=("width", "height"))
+
+
 def band_geometry(rig: Rig, rows, tangent=(1.0, 0.0), dtype=np.float32) -> BandGeometry:
     """:func:`pixel_geometry` of whole image rows, fused and compiled, in ``dtype``.
 
@@ -404,6 +409,6 @@ def band_geometry(rig: Rig, rows, tangent=(1.0, 0.0), dtype=np.float32) -> BandG
     dtype = np.dtype(dtype)
     cam = rig.camera
     with jax.enable_x64(dtype == np.float64):
-        k = jnp.asarray(_rig_constants(rig, tangent), dtype)
+        k = jnp.asarray(rig_constants(rig, tangent), dtype)
         out = _band_kernel(k, jnp.asarray(np.asarray(rows), dtype), width=cam.width, height=cam.height)
         return BandGeometry(*(np.asarray(a) for a in out))

@@ -17,6 +17,7 @@ texture is always extracted at full resolution.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 from typing import NamedTuple
 
@@ -27,8 +28,8 @@ import numpy as np
 from ._status import Status
 from .capture import CAPTURE_FILE, Capture, CaptureError
 from .fit import CombinedFit, ScanlineFit, fit_scanlines
-from .geometry import band_geometry
-from .reconstruct import MaskReason, reconstruct_brdf, sample_bilinear
+from .geometry import band_geometry_jnp, rig_constants
+from .reconstruct import MaskReason
 from .texture import extract_rho_d
 from .ward import WardParams, ward_geometry, ward_specular
 
@@ -331,73 +332,118 @@ class Reconstruction(NamedTuple):
     probe: np.ndarray
 
 
+def _sample_bilinear_jnp(image, uv):
+    """:func:`~wardjax.reconstruct.sample_bilinear` in ``jnp``: values and "a neighbour is clipped".
+
+    ``image`` is ``(h, w, C + 3)``: ``C`` values, then the 3 clipped flags as 0/1.
+    """
+    h, w, c3 = image.shape
+    u, v = uv[..., 0], uv[..., 1]
+    ok = jnp.isfinite(u) & jnp.isfinite(v) & (u >= 0) & (u <= w - 1) & (v >= 0) & (v <= h - 1)
+    us, vs = jnp.where(ok, u, 0.0), jnp.where(ok, v, 0.0)
+    u0 = jnp.minimum(jnp.floor(us).astype(jnp.int32), max(w - 2, 0))
+    v0 = jnp.minimum(jnp.floor(vs).astype(jnp.int32), max(h - 2, 0))
+    u1, v1 = jnp.minimum(u0 + 1, w - 1), jnp.minimum(v0 + 1, h - 1)
+    fu, fv = (us - u0)[..., None], (vs - v0)[..., None]
+    i00, i01, i10, i11 = image[v0, u0], image[v0, u1], image[v1, u0], image[v1, u1]
+    c = c3 - 3
+    out = (i00[..., :c] * (1 - fu) + i01[..., :c] * fu) * (1 - fv) + (i10[..., :c] * (1 - fu) + i11[..., :c] * fu) * fv
+    clip = jnp.maximum(jnp.maximum(i00[..., c:], i01[..., c:]), jnp.maximum(i10[..., c:], i11[..., c:])) > 0
+    return jnp.where(ok[..., None], out, jnp.nan), clip & ok[..., None]
+
+
+@functools.partial(jax.jit, static_argnames=("width", "height"))
+def _std_mask_kernel(k, rows, *, width: int, height: int):
+    return band_geometry_jnp(k, rows, width=width, height=height)[4]
+
+
+@functools.partial(jax.jit, static_argnames=("width", "height"))
+def _reconstruct_band(k, rows, lit, dark, clipped, std, offset, rho, noise_floor, *, width: int, height: int):
+    """Geometry, mirror sampling and eq. "f_r,measured" of a band of rows, fused (dtype of ``k``).
+
+    The same computation as :func:`~wardjax.geometry.pixel_geometry`,
+    :func:`~wardjax.reconstruct.sample_bilinear` and
+    :func:`~wardjax.reconstruct.reconstruct_brdf` (the NumPy references,
+    tested equal). ``std`` is the cropped standard ``(h', w', 9)``: lit,
+    dark, clipped; ``offset`` its ``(u, v)`` origin in the image.
+    """
+    pts, wi, wo, probe, _, muv, mok = band_geometry_jnp(k, rows, width=width, height=height)
+    sampled, clip_std = _sample_bilinear_jnp(std, muv - offset[None, None, :])
+    v_std, v_std_bg = sampled[..., :3], sampled[..., 3:]
+    num = lit.astype(k.dtype) - dark.astype(k.dtype)
+    den = v_std - v_std_bg
+    finite = jnp.isfinite(num) & jnp.isfinite(den)
+    u8 = lambda cond, reason: jnp.where(cond, jnp.uint8(reason), jnp.uint8(0))  # noqa: E731
+    fl = (u8(~finite, MaskReason.NONFINITE) | u8(~mok[..., None], MaskReason.OFF_STANDARD)
+          | u8(clipped | clip_std, MaskReason.SATURATED)
+          | u8(finite & ((num < noise_floor) | (den < noise_floor) | (den <= 0)), MaskReason.BELOW_NOISE))
+    ok = (fl == 0) & probe[..., None]
+    f_r = jnp.where(ok, num / jnp.where(ok, den, 1.0) * (rho / jnp.pi)[None, None, :], jnp.nan)
+    flags = jnp.where(probe, fl[..., 0] | fl[..., 1] | fl[..., 2], jnp.uint8(0))
+    pts = jnp.where(probe[..., None], pts, jnp.nan)
+    wi = jnp.where(probe[..., None], wi, 0.0)
+    wo = jnp.where(probe[..., None], wo, 0.0)
+    return f_r, flags, wi, wo, pts, probe
+
+
 def reconstruct_capture(cap, *, band_rows: int = 512, dtype=np.float32) -> Reconstruction:
     """Reconstruct ``f_r`` for every probe pixel of a ``method = "scanline"`` capture.
 
-    Two passes over bands of ``band_rows`` rows. First the geometry of every
-    pixel (:func:`~wardjax.geometry.band_geometry`, fused and compiled, in
-    ``dtype``): its sample point, directions, probe/standard membership and
-    mirror pixel. Then the standard's image is cropped to the standard and
-    smoothed there (``fit.smooth_standard_px``): it is uniform and Lambertian,
-    so it varies only slowly with irradiance and vignetting, and smoothing
-    removes its noise and quantisation from every reconstructed value.
-    Finally each probe pixel's mirror point on the standard is sampled
-    bilinearly and :func:`~wardjax.reconstruct_brdf` applied with its masks.
-    ``dtype`` sets the storage and the geometry's precision (float32 keeps a
-    12 MP capture in memory; float64 for the effects workflow).
+    Two passes over bands of ``band_rows`` rows, each one compiled program
+    (``jnp``, in ``dtype``). First, which pixels see the standard: its image
+    is cropped there and smoothed (``fit.smooth_standard_px``); the standard
+    is uniform and Lambertian, so it varies only slowly with irradiance and
+    vignetting, and smoothing removes its noise and quantisation from every
+    reconstructed value. Then, per band, the geometry of each pixel
+    (:func:`~wardjax.geometry.band_geometry_jnp`), its mirror point on the
+    standard sampled bilinearly, and eq. "f_r,measured" with its masks
+    (:func:`~wardjax.reconstruct_brdf`), fused. ``dtype`` sets the storage
+    and the precision (float32 keeps a 12 MP capture in memory and is ~10⁻⁴
+    px accurate in the mirror mapping; float64 for the effects workflow).
     """
     cfg, rig = cap.config, cap.rig
     cam = rig.camera
     h, w = cam.height, cam.width
     dtype = np.dtype(dtype)
-    f_r = np.full((h, w, 3), np.nan, dtype)
-    wi = np.zeros((h, w, 3), dtype)
-    wo = np.zeros((h, w, 3), dtype)
-    points = np.full((h, w, 3), np.nan, dtype)
-    flags = np.zeros((h, w), np.uint8)
-    probe = np.zeros((h, w), bool)
-    on_std = np.zeros((h, w), bool)
-    mirror = {}  # band start → (probe mask, mirror pixels, mirror ok) of its probe pixels
     hb = max(1, min(band_rows, h))
-    for r0 in range(0, h, hb):
-        r1 = min(r0 + hb, h)
-        g = band_geometry(rig, np.arange(r0, r0 + hb), cap.tangent, dtype)  # equal bands: one compile
-        n = r1 - r0
-        inp = g.in_probe[:n]
-        probe[r0:r1] = inp
-        on_std[r0:r1] = g.in_standard[:n]
-        if not inp.any():
-            continue
-        wi[r0:r1][inp] = g.wi[:n][inp]
-        wo[r0:r1][inp] = g.wo[:n][inp]
-        points[r0:r1][inp] = g.points[:n][inp]
-        mirror[r0] = (inp, g.mirror_pixels[:n][inp].astype(np.float64), g.mirror_ok[:n][inp])
-    if not mirror:
-        return Reconstruction(f_r, flags, wi, wo, points, probe)
-    # The standard, cropped (with room for the bilinear neighbours and the smoothing) and smoothed.
-    sigma = cfg.fit.smooth_standard_px
-    box = _bbox(on_std, int(math.ceil(4 * sigma)) + 2)
-    if box is None:  # no standard in view: every probe pixel is OFF_STANDARD
-        box = (slice(0, min(2, h)), slice(0, min(2, w)))
-    lit_std, clip_std_img = cap.lit[box], cap.lit_clipped[box]
-    dark_std = None if cap.dark is None else cap.dark[box]
-    if sigma > 0:
-        std_mask = on_std[box] & ~clip_std_img.any(axis=-1)
-        lit_std = _smooth_on(lit_std, std_mask, sigma)
-        dark_std = None if dark_std is None else _smooth_on(dark_std, std_mask, sigma)
-    offset = np.array([box[1].start, box[0].start], np.float64)
-    for r0, (inp, muv, mok) in mirror.items():
-        r1 = r0 + inp.shape[0]
-        muv = muv - offset
-        v_std, clip_std = sample_bilinear(lit_std, muv, reduce_max=clip_std_img)
-        v_std_bg = None if dark_std is None else sample_bilinear(dark_std, muv)
-        v_bg = None if cap.dark is None else cap.dark[r0:r1][inp]
-        fr, fl = reconstruct_brdf(
-            cap.lit[r0:r1][inp], v_bg, v_std, v_std_bg, cap.rho_standard, on_standard=mok,
-            saturated=cap.lit_clipped[r0:r1][inp] | clip_std, noise_floor=cfg.fit.noise_floor, return_flags=True,
-        )
-        f_r[r0:r1][inp] = fr
-        flags[r0:r1][inp] = np.bitwise_or.reduce(fl, axis=-1)
+    f_r = np.empty((h, w, 3), dtype)
+    wi = np.empty((h, w, 3), dtype)
+    wo = np.empty((h, w, 3), dtype)
+    points = np.empty((h, w, 3), dtype)
+    flags = np.empty((h, w), np.uint8)
+    probe = np.empty((h, w), bool)
+    on_std = np.empty((h, w), bool)
+    dims = {"width": w, "height": h}
+
+    def pad(a):  # a band shorter than hb, padded: one compilation for the whole image
+        return a if a.shape[0] == hb else np.concatenate([a, np.zeros((hb - a.shape[0],) + a.shape[1:], a.dtype)])
+
+    with jax.enable_x64(dtype == np.float64):
+        k = jnp.asarray(rig_constants(rig, cap.tangent), dtype)
+        bands = [(r0, min(r0 + hb, h)) for r0 in range(0, h, hb)]
+        for r0, r1 in bands:
+            on_std[r0:r1] = np.asarray(_std_mask_kernel(k, jnp.arange(r0, r0 + hb, dtype=dtype), **dims))[: r1 - r0]
+        sigma = cfg.fit.smooth_standard_px
+        box = _bbox(on_std, int(math.ceil(4 * sigma)) + 2) or (slice(0, min(2, h)), slice(0, min(2, w)))
+        lit_std, clip_std = cap.lit[box], cap.lit_clipped[box]
+        dark_std = np.zeros_like(lit_std) if cap.dark is None else cap.dark[box]
+        if sigma > 0:
+            std_mask = on_std[box] & ~clip_std.any(axis=-1)
+            lit_std = _smooth_on(lit_std, std_mask, sigma)
+            dark_std = dark_std if cap.dark is None else _smooth_on(dark_std, std_mask, sigma)
+        std = jnp.asarray(np.concatenate([lit_std, dark_std, clip_std.astype(np.float32)], -1), dtype)
+        del lit_std, dark_std, clip_std
+        offset = jnp.asarray([box[1].start, box[0].start], dtype)
+        rho = jnp.asarray(np.broadcast_to(cap.rho_standard, (3,)), dtype)
+        nf = jnp.asarray(cfg.fit.noise_floor, dtype)
+        zeros = np.zeros((hb, w, 3), np.float32)
+        for r0, r1 in bands:
+            n = r1 - r0
+            dark = zeros if cap.dark is None else pad(cap.dark[r0:r1])
+            out = _reconstruct_band(k, jnp.arange(r0, r0 + hb, dtype=dtype), pad(cap.lit[r0:r1]), dark,
+                                    pad(cap.lit_clipped[r0:r1]), std, offset, rho, nf, **dims)
+            for dst, src in zip((f_r, flags, wi, wo, points, probe), out):
+                dst[r0:r1] = np.asarray(src)[:n]
     return Reconstruction(f_r, flags, wi, wo, points, probe)
 
 
