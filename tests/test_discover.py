@@ -60,6 +60,18 @@ def test_hidden_effect_parameters_recovered(reports):
     assert abs(eps - case.truth["strength"]) < 4 * rep.steps[0].stderr["eps"] + 0.01 * abs(case.truth["strength"])
 
 
+def test_absorbed_gamma_is_named_not_a_partial_match():
+    """Bench γ draw 6 (ε = −0.11, 4.8 σ RMS): ρd, ρs and α absorb all but Δχ² ≈ 30 of it, so it 'explains'
+    only 28 % of an excess χ² − dof that is mostly noise (SD √(2 dof) ≈ 110); with γ the gap is within the
+    noise, so it is named."""
+    case = bench.simulate_case("gamma", bench.case_seed(0, "gamma", 6))
+    rep = discover(ScanlineModel(), case.data, keep_plot_data=False)
+    assert rep.found == ["gamma"] and rep.partial == []
+    ev = rep.steps[0].evidence
+    assert ev.explained < 0.5 and ev.delta_bic > 10 and ev.gap_p_after > 1e-3
+    assert abs(rep.steps[0].params["eps"] - case.truth["strength"]) < 4 * rep.steps[0].stderr["eps"]
+
+
 def test_out_of_library_effect_is_reported_unexplained(reports):
     """Orange peel (periodic waviness) is not in the library: no confident name, unexplained structure."""
     case, rep = reports[bench.OUT_OF_LIBRARY]
