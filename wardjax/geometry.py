@@ -339,44 +339,46 @@ def _jnp_in_box(x, y, box):
     return (x >= box[0]) & (x <= box[1]) & (y >= box[2]) & (y <= box[3])
 
 
-def band_geometry_jnp(k, rows, *, width: int, height: int):
+def band_geometry_jnp(k, rows, *, width: int, height: int, col0=0, ncols: int | None = None):
     """:func:`pixel_geometry` + :func:`to_material_frame` of whole rows in ``jnp`` (traceable; dtype of ``k``).
 
-    ``k`` is :func:`rig_constants`; returns the fields of :class:`BandGeometry`.
+    ``k`` is :func:`rig_constants`; returns the fields of :class:`BandGeometry`
+    for image columns ``col0 … col0 + ncols − 1`` (default all ``width``) of ``rows``.
     """
-    axes, c = k[0:9].reshape(3, 3), k[9:12]
+    # Planar: every quantity is a (B, W) plane per component (vectorises; no size-3 axes until the end).
+    ax = [[k[3 * i + j] for j in range(3)] for i in range(3)]  # rows right, down, forward
+    c = [k[9], k[10], k[11]]
     fx, fy, cx, cy = k[12], k[13], k[14], k[15]
     lamp, probe, std, t = k[16:19], k[19:23], k[23:27], k[27:29]
-    shape = (rows.shape[0], width)
-    u = jnp.broadcast_to(jnp.arange(width, dtype=k.dtype)[None, :], shape)
+    ncols = width if ncols is None else ncols
+    shape = (rows.shape[0], ncols)
+    u = jnp.broadcast_to((jnp.arange(ncols, dtype=k.dtype) + jnp.asarray(col0, k.dtype))[None, :], shape)
     v = jnp.broadcast_to(rows.astype(k.dtype)[:, None], shape)
-    a = ((u - cx) / fx)[..., None]
-    b = ((v - cy) / fy)[..., None]
-    d = a * axes[0][None, None, :] + b * axes[1][None, None, :] + axes[2][None, None, :]  # (B, W, 3)
-    dz = d[..., 2]
+    a = (u - cx) / fx
+    b = (v - cy) / fy
+    dx, dy, dz = (a * ax[0][j] + b * ax[1][j] + ax[2][j] for j in range(3))
     hit = dz < -1e-12
     s = jnp.where(hit, -c[2] / jnp.where(hit, dz, -1.0), jnp.nan)
-    x = c[0] + s * d[..., 0]
-    y = c[1] + s * d[..., 1]
+    x = c[0] + s * dx
+    y = c[1] + s * dy
     pts = jnp.stack([x, y, jnp.where(hit, 0.0, jnp.nan).astype(k.dtype)], -1)
-    p0 = jnp.stack([x, y, jnp.zeros_like(x)], -1)
 
-    def unit_to_material(to):
-        w = to / jnp.linalg.norm(to, axis=-1, keepdims=True)
-        w = jnp.stack([w[..., 0] * t[0] + w[..., 1] * t[1], -w[..., 0] * t[1] + w[..., 1] * t[0], w[..., 2]], -1)
+    def unit_to_material(ex, ey, ez):
+        inv = 1.0 / jnp.sqrt(ex * ex + ey * ey + ez * ez)
+        ex, ey, ez = ex * inv, ey * inv, ez * inv
+        w = jnp.stack([ex * t[0] + ey * t[1], -ex * t[1] + ey * t[0], ez], -1)
         return jnp.where(hit[..., None], w, 0.0)
 
-    wi = unit_to_material(lamp[None, None, :] - p0)
-    wo = unit_to_material(c[None, None, :] - p0)
+    wi = unit_to_material(lamp[0] - x, lamp[1] - y, jnp.broadcast_to(lamp[2], shape))
+    wo = unit_to_material(c[0] - x, c[1] - y, jnp.broadcast_to(c[2], shape))
     in_probe = hit & _jnp_in_box(x, y, probe)
     in_std = hit & _jnp_in_box(x, y, std)
-    rel = jnp.stack([-x, y, jnp.zeros_like(x)], -1) - c[None, None, :]  # mirror point − camera
-    cam = rel @ axes.T
-    z = cam[..., 2]
+    rx, ry, rz = -x - c[0], y - c[1], -c[2]  # mirror point − camera
+    cam_x, cam_y, z = (ax[i][0] * rx + ax[i][1] * ry + ax[i][2] * rz for i in range(3))
     front = z > 1e-9
     zs = jnp.where(front, z, jnp.nan)
-    mu = cx + fx * cam[..., 0] / zs
-    mv = cy + fy * cam[..., 1] / zs
+    mu = cx + fx * cam_x / zs
+    mv = cy + fy * cam_y / zs
     inside = (mu >= 0) & (mu <= width - 1) & (mv >= 0) & (mv <= height - 1)
     mirror_ok = hit & front & inside & _jnp_in_box(-x, y, std)
     return pts, wi, wo, in_probe, in_std, jnp.stack([mu, mv], -1), mirror_ok

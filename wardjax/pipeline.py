@@ -353,21 +353,25 @@ def _sample_bilinear_jnp(image, uv):
 
 
 @functools.partial(jax.jit, static_argnames=("width", "height"))
-def _std_mask_kernel(k, rows, *, width: int, height: int):
-    return band_geometry_jnp(k, rows, width=width, height=height)[4]
+def _masks_kernel(k, rows, *, width: int, height: int):
+    """The probe and standard masks of a band (the rest of the geometry is compiled away)."""
+    g = band_geometry_jnp(k, rows, width=width, height=height)
+    return g[3], g[4]
 
 
-@functools.partial(jax.jit, static_argnames=("width", "height"))
-def _reconstruct_band(k, rows, lit, dark, clipped, std, offset, rho, noise_floor, *, width: int, height: int):
+@functools.partial(jax.jit, static_argnames=("width", "height", "ncols"))
+def _reconstruct_band(k, rows, col0, lit, dark, clipped, std, offset, rho, noise_floor, *, width: int, height: int,
+                      ncols: int):
     """Geometry, mirror sampling and eq. "f_r,measured" of a band of rows, fused (dtype of ``k``).
 
     The same computation as :func:`~wardjax.geometry.pixel_geometry`,
     :func:`~wardjax.reconstruct.sample_bilinear` and
     :func:`~wardjax.reconstruct.reconstruct_brdf` (the NumPy references,
     tested equal). ``std`` is the cropped standard ``(h', w', 9)``: lit,
-    dark, clipped; ``offset`` its ``(u, v)`` origin in the image.
+    dark, clipped; ``offset`` its ``(u, v)`` origin in the image. Only
+    columns ``col0 … col0 + ncols − 1`` (those through the probe).
     """
-    pts, wi, wo, probe, _, muv, mok = band_geometry_jnp(k, rows, width=width, height=height)
+    pts, wi, wo, probe, _, muv, mok = band_geometry_jnp(k, rows, width=width, height=height, col0=col0, ncols=ncols)
     sampled, clip_std = _sample_bilinear_jnp(std, muv - offset[None, None, :])
     v_std, v_std_bg = sampled[..., :3], sampled[..., 3:]
     num = lit.astype(k.dtype) - dark.astype(k.dtype)
@@ -390,11 +394,11 @@ def reconstruct_capture(cap, *, band_rows: int = 512, dtype=np.float32) -> Recon
     """Reconstruct ``f_r`` for every probe pixel of a ``method = "scanline"`` capture.
 
     Two passes over bands of ``band_rows`` rows, each one compiled program
-    (``jnp``, in ``dtype``). First, which pixels see the standard: its image
+    (``jnp``, in ``dtype``). First, which pixels see the probe and the standard; the standard's image
     is cropped there and smoothed (``fit.smooth_standard_px``); the standard
     is uniform and Lambertian, so it varies only slowly with irradiance and
     vignetting, and smoothing removes its noise and quantisation from every
-    reconstructed value. Then, per band, the geometry of each pixel
+    reconstructed value. Then, per band of the probe's rows and columns only, the geometry of each pixel
     (:func:`~wardjax.geometry.band_geometry_jnp`), its mirror point on the
     standard sampled bilinearly, and eq. "f_r,measured" with its masks
     (:func:`~wardjax.reconstruct_brdf`), fused. ``dtype`` sets the storage
@@ -406,12 +410,12 @@ def reconstruct_capture(cap, *, band_rows: int = 512, dtype=np.float32) -> Recon
     h, w = cam.height, cam.width
     dtype = np.dtype(dtype)
     hb = max(1, min(band_rows, h))
-    f_r = np.empty((h, w, 3), dtype)
-    wi = np.empty((h, w, 3), dtype)
-    wo = np.empty((h, w, 3), dtype)
-    points = np.empty((h, w, 3), dtype)
-    flags = np.empty((h, w), np.uint8)
-    probe = np.empty((h, w), bool)
+    f_r = np.full((h, w, 3), np.nan, dtype)
+    wi = np.zeros((h, w, 3), dtype)
+    wo = np.zeros((h, w, 3), dtype)
+    points = np.full((h, w, 3), np.nan, dtype)
+    flags = np.zeros((h, w), np.uint8)
+    probe = np.zeros((h, w), bool)
     on_std = np.empty((h, w), bool)
     dims = {"width": w, "height": h}
 
@@ -420,9 +424,13 @@ def reconstruct_capture(cap, *, band_rows: int = 512, dtype=np.float32) -> Recon
 
     with jax.enable_x64(dtype == np.float64):
         k = jnp.asarray(rig_constants(rig, cap.tangent), dtype)
-        bands = [(r0, min(r0 + hb, h)) for r0 in range(0, h, hb)]
-        for r0, r1 in bands:
-            on_std[r0:r1] = np.asarray(_std_mask_kernel(k, jnp.arange(r0, r0 + hb, dtype=dtype), **dims))[: r1 - r0]
+        for r0 in range(0, h, hb):
+            r1 = min(r0 + hb, h)
+            pm, sm = _masks_kernel(k, jnp.arange(r0, r0 + hb, dtype=dtype), **dims)
+            probe[r0:r1], on_std[r0:r1] = np.asarray(pm)[: r1 - r0], np.asarray(sm)[: r1 - r0]
+        pbox = _bbox(probe, 0)
+        if pbox is None:
+            return Reconstruction(f_r, flags, wi, wo, points, probe)
         sigma = cfg.fit.smooth_standard_px
         box = _bbox(on_std, int(math.ceil(4 * sigma)) + 2) or (slice(0, min(2, h)), slice(0, min(2, w)))
         lit_std, clip_std = cap.lit[box], cap.lit_clipped[box]
@@ -436,14 +444,18 @@ def reconstruct_capture(cap, *, band_rows: int = 512, dtype=np.float32) -> Recon
         offset = jnp.asarray([box[1].start, box[0].start], dtype)
         rho = jnp.asarray(np.broadcast_to(cap.rho_standard, (3,)), dtype)
         nf = jnp.asarray(cfg.fit.noise_floor, dtype)
-        zeros = np.zeros((hb, w, 3), np.float32)
-        for r0, r1 in bands:
-            n = r1 - r0
-            dark = zeros if cap.dark is None else pad(cap.dark[r0:r1])
-            out = _reconstruct_band(k, jnp.arange(r0, r0 + hb, dtype=dtype), pad(cap.lit[r0:r1]), dark,
-                                    pad(cap.lit_clipped[r0:r1]), std, offset, rho, nf, **dims)
+        rows_p, cols = pbox
+        hb = max(1, min(hb, rows_p.stop - rows_p.start))
+        zeros = np.zeros((hb, cols.stop - cols.start, 3), np.float32)
+        kw = {**dims, "ncols": cols.stop - cols.start}
+        for r0 in range(rows_p.start, rows_p.stop, hb):
+            r1 = min(r0 + hb, rows_p.stop)
+            n, sl = r1 - r0, (slice(r0, r1), cols)
+            dark = zeros if cap.dark is None else pad(cap.dark[sl])
+            out = _reconstruct_band(k, jnp.arange(r0, r0 + hb, dtype=dtype), jnp.asarray(cols.start, dtype),
+                                    pad(cap.lit[sl]), dark, pad(cap.lit_clipped[sl]), std, offset, rho, nf, **kw)
             for dst, src in zip((f_r, flags, wi, wo, points, probe), out):
-                dst[r0:r1] = np.asarray(src)[:n]
+                dst[sl] = np.asarray(src)[:n]
     return Reconstruction(f_r, flags, wi, wo, points, probe)
 
 
