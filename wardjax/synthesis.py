@@ -22,9 +22,12 @@ at each scale but the arrangement is random. See ``tests/test_synthesis.py``
 
 Numerics: the pyramid runs in the input's float dtype (float64 for the
 ``steerable_pyramid`` functions when given float64); analysis and synthesis run
-in float32. Exact histogram matching needs a full sort of every subband: on CPU
-that sort is done by NumPy (XLA's CPU sort is about ten times slower), on other
-backends by ``jax.lax.sort``; both give the same permutation.
+in float32 (a ρd texture needs no more). Exact histogram matching needs a full
+sort of every subband: on CPU it is done by NumPy on a thread pool (XLA's CPU
+sort is 4-5 times slower), on other backends by ``jax.lax.sort``; both sort
+the same distinct keys, so they give the same permutation and identical
+results. Synthesis handles one channel per XLA program and interleaves the
+channels, so the host sorts one while XLA transforms another.
 """
 
 from __future__ import annotations
@@ -34,6 +37,7 @@ import functools
 import json
 import math
 import os
+import sys
 import tempfile
 from pathlib import Path
 from typing import Literal
@@ -271,6 +275,17 @@ def periodic_smooth_decomposition(image) -> tuple[np.ndarray, np.ndarray]:
 # the float32 value mapped to an order-preserving uint32 in the high word, the
 # position in the low word. Keys are distinct, so the permutation is unique and
 # deterministic, and the sorted keys also give back the sorted values.
+#
+# Where the sort runs. XLA's CPU sort calls a compiled comparator per
+# comparison and is 4-5x slower than NumPy's vectorised (AVX2) sort of the same
+# keys, so on CPU the rank step (pack, sort, scatter the targets into rank
+# order) runs in NumPy, one row per task on a thread pool (NumPy releases the
+# GIL); elsewhere it runs in XLA. Both give the same permutation, hence
+# bit-identical results. Arrays cross between JAX and NumPy without copies:
+# ``np.asarray`` views a CPU jax.Array, and ``jax.device_put`` wraps a 64-byte
+# aligned NumPy array (:func:`_aligned_empty`).
+
+SortMethod = Literal["auto", "numpy", "xla"]
 
 
 def _order_key(x: Array) -> Array:
@@ -297,33 +312,127 @@ def _unpack(keys: Array) -> tuple[Array, Array]:
     return idx, vals
 
 
-def _sort_host(keys: list[np.ndarray]) -> list[np.ndarray]:
-    """Sort every row (last axis) of every array in place with NumPy, rows spread over threads (NumPy releases the GIL)."""
-    rows = [(i, j) for i, k in enumerate(keys) for j in range(math.prod(k.shape[:-1]))]
-    flat = [k.reshape(-1, k.shape[-1]) for k in keys]
-    out = flat
+def _scatter(idx: Array, values: Array) -> Array:
+    """``out[..., idx[..., k]] = values[..., k]`` along the last axis (``idx`` a permutation per row)."""
+    n = idx.shape[-1]
+    flat_i, flat_v = idx.reshape(-1, n), values.reshape(-1, n)
+    out = jax.vmap(lambda i, v: jnp.zeros(n, v.dtype).at[i].set(v, unique_indices=True))(flat_i, flat_v)
+    return out.reshape(idx.shape)
 
-    def one(ij):
-        i, j = ij
-        flat[i][j].sort()
 
-    workers = min(len(rows), os.cpu_count() or 1)
+def _aligned_empty(shape: tuple[int, ...], dtype) -> np.ndarray:
+    """Uninitialised NumPy array with 64-byte aligned data, which ``jax.device_put`` wraps on CPU without copying."""
+    dtype = np.dtype(dtype)
+    nbytes = math.prod(shape) * dtype.itemsize
+    buf = np.empty(nbytes + 64, np.uint8)
+    start = -buf.ctypes.data % 64
+    return buf[start : start + nbytes].view(dtype).reshape(shape)
+
+
+def _signed_key_np(s: np.ndarray) -> np.ndarray:
+    """float32 bit patterns (as int32) ↔ int32 keys with the same order under *signed* comparison.
+
+    ``s ^ ((s >> 31) & 0x7FFFFFFF)``: negative floats get their magnitude bits
+    flipped. An involution, so it also maps keys back to bit patterns. It is
+    :func:`_order_key` with the top bit flipped, so it orders values (and
+    ``−0 < +0``) exactly as the XLA keys do.
+    """
+    k = s >> 31  # arithmetic shift: −1 where negative
+    k &= np.int32(0x7FFFFFFF)
+    k ^= s
+    return k
+
+
+def _rank_row(v, target, pick, out, picked, pos) -> None:
+    """One row on the host: sorted values at ``pick`` into ``picked``; with ``target``, ``out[rank⁻¹] = target``.
+
+    Keys are ``signed_key(v) · 2³² + position`` as int64 (NumPy's AVX2 sort
+    compares signed 64-bit integers natively, unsigned ones with an extra
+    step). Without a target only order statistics are needed, and sorting the
+    values alone gives the same ones, faster.
+    """
+    if target is None:
+        picked[:] = np.sort(v)[pick]
+        return
+    keys = _signed_key_np(v.view(np.int32)).astype(np.int64)
+    keys <<= np.int64(32)
+    keys |= pos
+    keys.sort()
+    low = keys.view(np.uint32)[0 if sys.byteorder == "little" else 1 :: 2]  # the positions, no copy
+    np.put(out, low.astype(np.intp), target)
+    picked[:] = _signed_key_np((keys[pick] >> np.int64(32)).astype(np.int32)).view(np.float32)
+
+
+def _rank_host(values, targets, picks, workers: int | None = None):
+    """:func:`_rank_match` in NumPy: rows spread over a thread pool, largest first."""
+    values = [np.ascontiguousarray(v, np.float32) for v in values]
+    targets = [None] * len(values) if targets is None else [np.ascontiguousarray(t, np.float32) for t in targets]
+    picks = [np.asarray(p, np.intp) for p in picks]
+    matched = [None if t is None else _aligned_empty(v.shape, np.float32) for v, t in zip(values, targets)]
+    picked = [np.empty((*v.shape[:-1], len(p)), np.float32) for v, p in zip(values, picks)]
+    jobs = []
+    for v, t, m, pk, p in zip(values, targets, matched, picked, picks):
+        n, r = v.shape[-1], math.prod(v.shape[:-1])
+        pos = np.arange(n, dtype=np.int64) if t is not None else None
+        rows = (v.reshape(r, n), None if t is None else t.reshape(r, n),
+                None if m is None else m.reshape(r, n), pk.reshape(r, len(p)))
+        for j in range(r):
+            jobs.append((rows[0][j], None if t is None else rows[1][j], p, None if m is None else rows[2][j],
+                         rows[3][j], pos))
+    jobs.sort(key=lambda job: -job[0].size)
+    workers = min(len(jobs), workers or os.cpu_count() or 1)
     if workers <= 1:
-        for ij in rows:
-            one(ij)
+        for job in jobs:
+            _rank_row(*job)
     else:
         with concurrent.futures.ThreadPoolExecutor(workers) as pool:
-            list(pool.map(one, sorted(rows, key=lambda ij: -flat[ij[0]].shape[-1])))
-    return [o.reshape(k.shape) for o, k in zip(out, keys)]
+            for f in [pool.submit(_rank_row, *job) for job in jobs]:
+                f.result()
+    return (None if targets[0] is None else tuple(jax.device_put(m) for m in matched),
+            tuple(jax.device_put(p) for p in picked))
 
 
-_sort_device = jax.jit(lambda keys: tuple(jnp.sort(k, axis=-1) for k in keys))
+@functools.partial(jax.jit, static_argnames="picks")
+def _rank_xla(values, targets, picks):
+    """:func:`_rank_match` in XLA (``lax.sort`` of the same keys: the same permutation)."""
+    picks = [np.asarray(p, np.int32) for p in picks]
+    if targets is None:
+        return None, tuple(jnp.sort(v, axis=-1)[..., p] for v, p in zip(values, picks))
+    matched, picked = [], []
+    for v, t, p in zip(values, targets, picks):
+        idx, vals = _unpack(jnp.sort(_pack(v), axis=-1))
+        matched.append(_scatter(idx, t))
+        picked.append(vals[..., p])
+    return tuple(matched), tuple(picked)
 
 
-def _sort_keys(keys: tuple[Array, ...], method: Literal["auto", "numpy", "xla"] = "auto") -> tuple[Array, ...]:
+def _rank_match(values, targets, picks, method: SortMethod = "auto"):
+    """Exact rank matching of every row (last axis) of every array in ``values``.
+
+    For each row ``x`` (length ``n``) with sorted order ``x_(0) ≤ … ≤ x_(n−1)``
+    (ties broken by position): ``matched[i] = target[rank(i)]``, where ``target``
+    is the row's nondecreasing target values, and ``picked = x_(pick)``, the
+    order statistics at the given positions. ``targets=None`` computes only
+    ``picked``.
+
+    Parameters
+    ----------
+    values
+        Tuple of float32 arrays ``(..., n_g)``.
+    targets
+        Tuple of float32 arrays of the same shapes, or ``None``.
+    picks
+        Tuple (one per array) of tuples of int positions in ``[0, n_g)``.
+    method
+        ``"numpy"`` (host sort), ``"xla"`` or ``"auto"`` (NumPy on CPU).
+
+    Returns
+    -------
+    matched, picked : tuples of jax.Array (``matched`` is ``None`` without targets)
+    """
     if method == "xla" or (method == "auto" and jax.default_backend() != "cpu"):
-        return _sort_device(tuple(keys))
-    return tuple(jnp.asarray(k) for k in _sort_host([np.array(k) for k in keys]))
+        return _rank_xla(tuple(values), None if targets is None else tuple(targets), tuple(picks))
+    return _rank_host(values, targets, picks)
 
 
 def _targets(table: Float[Array, "... q"], probs: Float[Array, "q"], n: int) -> Float[Array, "... n"]:
@@ -358,31 +467,31 @@ def _table_cdf(v: Float[Array, "n"], table: Float[Array, "q"], probs: Float[Arra
 _KS_POINTS = 8192
 
 
-def _ks_sorted(sorted_vals: Float[Array, "... n"], table: Float[Array, "... q"], probs) -> Float[Array, "..."]:
-    """One-sample KS statistic of sorted samples against a quantile table, ``max_k |F(v_k) − ECDF|``.
+def _ks_stride(n: int) -> int:
+    """Order statistics the KS distance looks at: every ``max(1, n // 8192)``-th."""
+    return max(1, n // _KS_POINTS)
 
-    Evaluated at every ``s``-th order statistic, ``s = max(1, n // 8192)``: since
-    both F and the ECDF are nondecreasing this is within ``s / n ≤ 1/8192`` below
-    the exact statistic (exact for ``n < 16384``), at a fraction of the cost.
+
+def _ks_picks(n: int) -> tuple[int, ...]:
+    return tuple(range(0, n, _ks_stride(n)))
+
+
+def _ks_sorted(sub: Float[Array, "... m"], table: Float[Array, "... q"], probs, n_all: int) -> Float[Array, "..."]:
+    """One-sample KS statistic against a quantile table, ``max_k |F(v_k) − ECDF|``, from every ``s``-th order statistic.
+
+    ``sub`` holds the order statistics ``v_(0), v_(s), v_(2s), …`` of ``n_all``
+    samples, ``s = max(1, n_all // 8192)`` (:func:`_ks_picks`). Since both F
+    and the ECDF are nondecreasing this is within ``s / n ≤ 1/8192`` below the
+    exact statistic (exact for ``n < 16384``), at a fraction of the cost.
     """
-    n_all = sorted_vals.shape[-1]
-    stride = max(1, n_all // _KS_POINTS)
-    sub = sorted_vals[..., ::stride]
+    stride = _ks_stride(n_all)
     n = sub.shape[-1]
     flat_v = sub.reshape(-1, n)
-    flat_t = table.reshape(-1, table.shape[-1]).astype(sorted_vals.dtype)
-    f = jax.vmap(_table_cdf, in_axes=(0, 0, None))(flat_v, flat_t, probs.astype(sorted_vals.dtype))
+    flat_t = table.reshape(-1, table.shape[-1]).astype(sub.dtype)
+    f = jax.vmap(_table_cdf, in_axes=(0, 0, None))(flat_v, flat_t, probs.astype(sub.dtype))
     k = (jnp.arange(n, dtype=f.dtype) * stride)[None, :]
     d = jnp.maximum(jnp.max(f - k / n_all, axis=-1), jnp.max((k + 1) / n_all - f, axis=-1))
-    return d.reshape(sorted_vals.shape[:-1])
-
-
-def _scatter(idx: Array, values: Array) -> Array:
-    """``out[..., idx[..., k]] = values[..., k]`` along the last axis (``idx`` a permutation per row)."""
-    n = idx.shape[-1]
-    flat_i, flat_v = idx.reshape(-1, n), values.reshape(-1, n)
-    out = jax.vmap(lambda i, v: jnp.zeros(n, v.dtype).at[i].set(v, unique_indices=True))(flat_i, flat_v)
-    return out.reshape(idx.shape)
+    return d.reshape(sub.shape[:-1])
 
 
 def quantile_probabilities(n_quantiles: int) -> np.ndarray:
@@ -440,18 +549,12 @@ def match_histogram(values, quantiles, probabilities=None, *, axis: int = -1) ->
         raise ValueError(f"probabilities must increase from 0 to 1 with one per quantile ({q.shape[-1]}), got {p!r}")
     q = np.broadcast_to(q, (*v.shape[:-1], q.shape[-1]))
     with jax.enable_x64(True):
-        (keys,) = _sort_keys((_pack_jit(jnp.asarray(v)),))
-        out = _match_jit(keys, jnp.asarray(q), jnp.asarray(p))
+        target = _targets_jit(jnp.asarray(q), jnp.asarray(p), v.shape[-1])
+        (out,), _ = _rank_match((v,), (target,), ((),))
         return np.moveaxis(np.asarray(out), -1, axis)
 
 
-_pack_jit = jax.jit(_pack)
-
-
-@jax.jit
-def _match_jit(sorted_keys, table, probs):
-    idx, _ = _unpack(sorted_keys)
-    return _scatter(idx, _targets(table, probs, sorted_keys.shape[-1]))
+_targets_jit = jax.jit(_targets, static_argnames="n")
 
 
 # ================================================================== texture model
@@ -735,36 +838,37 @@ def _rho_s_vector(rho_s, channels: int, name: str = "rho_s") -> np.ndarray:
 def _pca(pixels: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Mean and orthonormal principal axes (columns, variance descending, largest component positive)."""
     mean = pixels.mean(axis=0)
-    cov = np.atleast_2d(np.cov(pixels - mean, rowvar=False))
+    x = pixels - mean
+    cov = (x.T @ x) / max(1, x.shape[0] - 1)  # the sample covariance (as np.cov), one BLAS product
     evals, evecs = np.linalg.eigh(cov)
     evecs = evecs[:, np.argsort(evals)[::-1]]
     sign = np.sign(evecs[np.argmax(np.abs(evecs), axis=0), np.arange(evecs.shape[1])])
     return mean, evecs * np.where(sign == 0, 1.0, sign)
 
 
+def _groups(hp, bands, lp, c: int) -> tuple:
+    """Subbands as sorting groups ``(C, g, n)``: highpass, each level's 4 orientations, lowpass."""
+    return (hp.reshape(c, 1, -1), *(b.reshape(c, ORIENTATIONS, -1) for b in bands), lp.reshape(c, 1, -1))
+
+
 @functools.partial(jax.jit, static_argnames="shapes")
-def _analysis_keys(d, masks, shapes):
-    """Periodic component of each channel → pyramid → packed sort keys per subband group, and pixel keys."""
+def _analysis_groups(d, masks, shapes):
+    """Periodic component of each channel → pyramid → subband groups, then the pixels ``(C, 1, H W)``."""
     c = d.shape[0]
     p, _ = periodic_smooth(d)
-    hp, bands, lp = pyramid_build(p, masks, shapes)
-    groups = (hp.reshape(c, 1, -1), *(b.reshape(c, ORIENTATIONS, -1) for b in bands), lp.reshape(c, 1, -1))
-    return tuple(_pack(g) for g in groups) + (_pack(d.reshape(c, 1, -1)),)
+    return _groups(*pyramid_build(p, masks, shapes), c) + (d.reshape(c, 1, -1),)
 
 
-@jax.jit
-def _quantiles_from_keys(sorted_keys, probs):
-    """Quantile tables at ``probs`` (linear interpolation between order statistics, position ``p (n − 1)``)."""
-    out = []
-    for k in sorted_keys:
-        _, vals = _unpack(k)
-        n = vals.shape[-1]
-        pos = probs * (n - 1.0)
-        i0 = jnp.clip(jnp.floor(pos).astype(jnp.int32), 0, n - 1)
-        i1 = jnp.minimum(i0 + 1, n - 1)
-        w = (pos - i0).astype(vals.dtype).reshape((1,) * (vals.ndim - 1) + (-1,))
-        out.append(vals[..., i0] * (1 - w) + vals[..., i1] * w)
-    return tuple(out)
+def _quantile_picks(n: int, probs: np.ndarray) -> tuple[tuple[int, ...], np.ndarray]:
+    """Order statistics for quantiles at ``probs`` (linear interpolation at position ``p (n − 1)``).
+
+    Returns the positions ``(i0…, i1…)`` to read from the sorted sample and the weights ``w``:
+    ``quantile = x_(i0) (1 − w) + x_(i1) w``.
+    """
+    pos = probs * (n - 1.0)
+    i0 = np.clip(np.floor(pos).astype(np.int64), 0, n - 1)
+    i1 = np.minimum(i0 + 1, n - 1)
+    return tuple(int(i) for i in np.concatenate([i0, i1])), pos - i0
 
 
 def analyze_texture(
@@ -839,12 +943,20 @@ def analyze_texture(
 
     pixels = a[y0:y1, x0:x1].reshape(-1, c)
     mean, basis = _pca(pixels)
-    d = ((pixels - mean) @ basis).T.reshape(c, rh, rw)
+    d = (basis.T @ (pixels - mean).T).reshape(c, rh, rw)  # channel-major directly, no transposed copy
     shapes = pyramid_shapes((rh, rw), height)
+    probs = quantile_probabilities(int(n_quantiles))
     with jax.enable_x64(True):
-        keys = _analysis_keys(jnp.asarray(d, jnp.float32), _device_masks((rh, rw), height, "float32"), shapes)
-        probs = quantile_probabilities(int(n_quantiles))
-        tables = [np.asarray(t, np.float64) for t in _quantiles_from_keys(_sort_keys(keys), jnp.asarray(probs))]
+        masks = _device_masks((rh, rw), height, "float32")
+        d32 = jnp.asarray(d, jnp.float32)
+        # One channel per XLA program (small buffers); XLA builds the next channel while the host sorts one.
+        per_channel = [_analysis_groups(d32[ch : ch + 1], masks, shapes) for ch in range(c)]
+        picks = [_quantile_picks(g.shape[-1], probs) for g in per_channel[0]]
+        picked = [_rank_match(groups, None, tuple(p for p, _ in picks))[1] for groups in per_channel]
+    tables = []  # quantile = x_(i0) (1 − λ) + x_(i1) λ
+    for g, (_, lam) in enumerate(picks):
+        v = np.concatenate([np.asarray(p[g], np.float64) for p in picked])
+        tables.append(v[..., : probs.size] * (1.0 - lam) + v[..., probs.size :] * lam)
     band_q = np.concatenate(tables[:-1], axis=1)  # (C, B, Q)
     return TextureModel(
         pca_mean=mean,
@@ -890,34 +1002,26 @@ class SynthesisResult(eqx.Module):
 
 
 @functools.partial(jax.jit, static_argnames="shapes")
-def _build_keys(d, masks, shapes):
+def _build_groups(d, masks, shapes):
+    """Pyramid of the pixels ``d`` (``(C, 1, H W)``) as sorting groups (:func:`_groups`)."""
     c = d.shape[0]
-    hp, bands, lp = pyramid_build(d, masks, shapes)
-    groups = (hp.reshape(c, 1, -1), *(b.reshape(c, ORIENTATIONS, -1) for b in bands), lp.reshape(c, 1, -1))
-    return tuple(_pack(g) for g in groups)
-
-
-@jax.jit
-def _band_ks(sorted_keys, tables, probs):
-    return jnp.concatenate([_ks_sorted(_unpack(k)[1], t, probs) for k, t in zip(sorted_keys, tables)], axis=-1)
+    return _groups(*pyramid_build(d.reshape(c, *shapes[0]), masks, shapes), c)
 
 
 @functools.partial(jax.jit, static_argnames="shapes")
-def _match_and_collapse(sorted_keys, targets, masks, shapes):
-    """Give every subband its target values in rank order, collapse the pyramid, pack the pixels for sorting."""
-    c = sorted_keys[0].shape[0]
-    matched = [_scatter(_unpack(k)[0], t) for k, t in zip(sorted_keys, targets)]
-    hp = matched[0].reshape(c, *shapes[0])
-    bands = tuple(m.reshape(c, ORIENTATIONS, *s) for m, s in zip(matched[1:-1], shapes[:-1]))
-    lp = matched[-1].reshape(c, *shapes[-1])
-    d = pyramid_reconstruct(hp, bands, lp, masks, shapes)
-    return _pack(d.reshape(c, 1, -1))
+def _collapse(groups, masks, shapes):
+    """Inverse of :func:`_build_groups`: collapse matched subband groups into pixels ``(C, 1, H W)``."""
+    c = groups[0].shape[0]
+    hp = groups[0].reshape(c, *shapes[0])
+    bands = tuple(g.reshape(c, ORIENTATIONS, *s) for g, s in zip(groups[1:-1], shapes[:-1]))
+    lp = groups[-1].reshape(c, *shapes[-1])
+    return pyramid_reconstruct(hp, bands, lp, masks, shapes).reshape(c, 1, -1)
 
 
-@functools.partial(jax.jit, static_argnames="shape")
-def _match_pixels(sorted_keys, targets, shape):
-    c = sorted_keys.shape[0]
-    return _scatter(_unpack(sorted_keys)[0], targets).reshape(c, *shape)
+@functools.partial(jax.jit, static_argnames="sizes")
+def _band_ks(picked, tables, probs, sizes):
+    """KS distance ``(C, B)`` of every subband from its every-s-th order statistics (:func:`_ks_sorted`)."""
+    return jnp.concatenate([_ks_sorted(p, t, probs, n) for p, t, n in zip(picked, tables, sizes)], axis=-1)
 
 
 @functools.partial(jax.jit, static_argnames="shapes")
@@ -933,6 +1037,41 @@ def _synthesis_targets(band_q, pixel_q, probs, shapes):
         groups.append(_targets(t, probs, n))
     pix = _targets(pixel_q.reshape(c, 1, -1), probs, shapes[0][0] * shapes[0][1])
     return tuple(groups), tuple(tables), pix
+
+
+def _heeger_bergen(noise, targets, tables, pix_targets, probs, masks, shapes, iterations: int, sort: SortMethod):
+    """The iterations of :func:`synthesize_texture`, channel by channel (``noise`` is ``(C, 1, H W)``).
+
+    Per channel: ``d ← match(noise, pixels)``; then ``iterations`` times: pyramid
+    of ``d``, every subband ``← match(subband, its targets)``,
+    ``d ← match(collapse, pixels)``; and a last pyramid to measure the final
+    distance. ``targets``, ``tables``, ``pix_targets`` hold one entry per
+    channel (:func:`_synthesis_targets` of that channel).
+
+    The channels are independent, so they are interleaved: while the host ranks
+    one channel's subbands, XLA builds or collapses another's pyramid
+    (asynchronous dispatch). Returns the ``C`` channels ``(1, 1, H W)`` and the
+    KS distances ``(iterations + 1, C, B)``, the first for the starting noise.
+    """
+    c = noise.shape[0]
+    sizes = tuple(t.shape[-1] for t in targets[0])
+    ks_picks = tuple(_ks_picks(n) for n in sizes)
+    ds = [_rank_match((noise[ch : ch + 1],), (pix_targets[ch],), ((),), sort)[0][0] for ch in range(c)]
+    groups = [_build_groups(d, masks, shapes) for d in ds]
+    ks = [[] for _ in range(c)]
+    for it in range(iterations + 1):
+        last = it == iterations  # the final pyramid only measures the distance: sort, no matching
+        collapsed = []
+        for ch in range(c):
+            matched, picked = _rank_match(groups[ch], None if last else targets[ch], ks_picks, sort)
+            ks[ch].append(_band_ks(picked, tables[ch], probs, sizes))
+            if not last:
+                collapsed.append(_collapse(matched, masks, shapes))
+        for ch in range(len(collapsed)):
+            (ds[ch],), _ = _rank_match((collapsed[ch],), (pix_targets[ch],), ((),), sort)
+            groups[ch] = _build_groups(ds[ch], masks, shapes)
+    ks = np.stack([np.concatenate([np.asarray(k[it], np.float64) for k in ks]) for it in range(iterations + 1)])
+    return ds, ks
 
 
 def _decorrelate(d: np.ndarray) -> np.ndarray:
@@ -1036,24 +1175,20 @@ def synthesize_texture(
     with jax.enable_x64(True):
         masks = _device_masks((hh, ww), model.height, "float32")
         probs = jnp.asarray(model.probabilities, jnp.float32)
-        targets, tables, pix_targets = _synthesis_targets(
-            jnp.asarray(model.band_quantiles, jnp.float64),
-            jnp.asarray(model.pixel_quantiles, jnp.float64),
-            jnp.asarray(model.probabilities, jnp.float64),
-            shapes,
-        )
-        noise = jax.random.normal(jax.random.key(int(seed)), (c, hh, ww), jnp.float32)
-        (pix_keys,) = _sort_keys((_pack_jit(noise.reshape(c, 1, -1)),), sort)
-        d = _match_pixels(pix_keys, pix_targets, (hh, ww))
-        ks = []
-        for _ in range(iterations):
-            keys = _sort_keys(_build_keys(d, masks, shapes), sort)
-            ks.append(_band_ks(keys, tables, probs))
-            (pix_keys,) = _sort_keys((_match_and_collapse(keys, targets, masks, shapes),), sort)
-            d = _match_pixels(pix_keys, pix_targets, (hh, ww))
-        ks.append(_band_ks(_sort_keys(_build_keys(d, masks, shapes), sort), tables, probs))
-        ks = np.stack([np.asarray(k, np.float64) for k in ks])
-        d = _decorrelate(np.asarray(d, np.float64))
+        noise = jax.random.normal(jax.random.key(int(seed)), (c, 1, hh * ww), jnp.float32)
+        per_channel = [  # each channel's sorted targets and tables (one at a time keeps XLA's buffers small)
+            _synthesis_targets(
+                jnp.asarray(model.band_quantiles[ch : ch + 1], jnp.float64),
+                jnp.asarray(model.pixel_quantiles[ch : ch + 1], jnp.float64),
+                jnp.asarray(model.probabilities, jnp.float64),
+                shapes,
+            )
+            for ch in range(c)
+        ]
+        targets, tables, pix_targets = zip(*per_channel)
+        ds, ks = _heeger_bergen(noise, targets, tables, pix_targets, probs, masks, shapes, iterations, sort)
+        channels = [np.asarray(d, np.float64).reshape(hh, ww) for d in ds]
+        d = _decorrelate(np.stack(channels))
     rgb = np.einsum("kc,chw->hwk", model.pca_basis, d) + model.pca_mean
     rgb = np.clip(rgb, 0.0, 1.0 - rs).astype(np.float32)
     return SynthesisResult(
