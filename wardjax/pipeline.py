@@ -189,6 +189,20 @@ class TextureErrors(NamedTuple):
     texture_rms: float
 
 
+@functools.partial(jax.jit, static_argnames="normalization")
+def _lobe_and_grad(wi, wo, a, normalization):
+    """The specular basis ``b(α)`` per unit ρs ``(S, N)``, ``∂b/∂α`` ``(k, S, N)`` and the valid mask.
+
+    ``a`` is ``(αx, αy)`` or ``(α,)`` (isotropic: both axes move together).
+    """
+    geom = ward_geometry(wi, wo, normalization)
+
+    def lobe(a):
+        return ward_specular(geom, a[0], a[-1])
+
+    return lobe(a), jnp.moveaxis(jax.jacfwd(lobe)(a), -1, 0), geom.valid
+
+
 def texture_field_covariance(F, WI, WO, cols, params: WardParams, model: str, normalization: str) -> TextureErrors:
     r"""Covariance of the joint (ρs, α…) with the ρd texture treated as a stationary random field.
 
@@ -244,15 +258,9 @@ def texture_field_covariance(F, WI, WO, cols, params: WardParams, model: str, no
     iso = model == "isotropic"
     rs, ax, ay = float(params.rho_s), float(params.alpha_x), float(params.alpha_y)
     with jax.enable_x64(True):
-        geom = ward_geometry(jnp.asarray(WI, jnp.float64), jnp.asarray(WO, jnp.float64), normalization)
         a0 = jnp.asarray([ax] if iso else [ax, ay], jnp.float64)
-
-        def lobe(a):  # the specular basis b(α) per unit ρs, (S, N)
-            return ward_specular(geom, a[0], a[-1])
-
-        b = np.asarray(lobe(a0), np.float64)
-        dlobe = np.asarray(jnp.moveaxis(jax.jacfwd(lobe)(a0), -1, 0), np.float64)  # (k, S, N)
-        valid = np.asarray(geom.valid, bool)
+        b, dlobe, valid = (np.asarray(x) for x in _lobe_and_grad(jnp.asarray(WI, jnp.float64),
+                                                                 jnp.asarray(WO, jnp.float64), a0, normalization))
     F = np.asarray(F, np.float64)
     w = (np.isfinite(F) & valid[..., None]).astype(np.float64)  # (S, N, 3)
     basis = np.concatenate([b[None], rs * dlobe], 0)  # (P, S, N): ∂(ρs b)/∂θ
