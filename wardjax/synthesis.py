@@ -435,16 +435,22 @@ def _rank_match(values, targets, picks, method: SortMethod = "auto"):
     return _rank_host(values, targets, picks)
 
 
-def _targets(table: Float[Array, "... q"], probs: Float[Array, "q"], n: int) -> Float[Array, "... n"]:
-    """Target sorted values: the quantile function (piecewise linear through ``(probs, table)``) at ``(k + 1/2) / n``."""
-    # In float64 (callers run under jax.enable_x64): near p = 1 the quantile function
-    # is steep and a float32 probability would cost ~1e-5 relative in the tail.
-    q = table.shape[-1]
-    probs = probs.astype(jnp.float64)
-    t = (jnp.arange(n, dtype=jnp.float64) + 0.5) / n
-    flat = table.reshape(-1, q).astype(jnp.float64)
-    out = jax.vmap(lambda f: jnp.interp(t, probs, f))(flat)
-    return out.reshape(*table.shape[:-1], n).astype(jnp.float32)
+def _targets(table: np.ndarray, probs: np.ndarray, n: int) -> jax.Array:
+    """Target sorted values: the quantile function (piecewise linear through ``(probs, table)``) at ``(k + 1/2) / n``.
+
+    ``table`` is ``(..., q)``; returns float32 ``(..., n)``. Interpolated in
+    float64 (near p = 1 the quantile function is steep and a float32 probability
+    would cost ~1e-5 relative in the tail), by ``np.interp``: ten times faster
+    than XLA's ``jnp.interp`` on CPU, and computed once per synthesis.
+    """
+    table = np.asarray(table, np.float64)
+    probs = np.asarray(probs, np.float64)
+    t = (np.arange(n, dtype=np.float64) + 0.5) / n
+    flat = table.reshape(-1, table.shape[-1])
+    out = _aligned_empty((flat.shape[0], n), np.float32)
+    for row, o in zip(flat, out):
+        o[:] = np.interp(t, probs, row)
+    return jax.device_put(out.reshape(*table.shape[:-1], n))
 
 
 def _table_cdf(v: Float[Array, "n"], table: Float[Array, "q"], probs: Float[Array, "q"]) -> Float[Array, "n"]:
@@ -549,12 +555,10 @@ def match_histogram(values, quantiles, probabilities=None, *, axis: int = -1) ->
         raise ValueError(f"probabilities must increase from 0 to 1 with one per quantile ({q.shape[-1]}), got {p!r}")
     q = np.broadcast_to(q, (*v.shape[:-1], q.shape[-1]))
     with jax.enable_x64(True):
-        target = _targets_jit(jnp.asarray(q), jnp.asarray(p), v.shape[-1])
+        target = _targets(q, p, v.shape[-1])
         (out,), _ = _rank_match((v,), (target,), ((),))
         return np.moveaxis(np.asarray(out), -1, axis)
 
-
-_targets_jit = jax.jit(_targets, static_argnames="n")
 
 
 # ================================================================== texture model
@@ -1024,16 +1028,15 @@ def _band_ks(picked, tables, probs, sizes):
     return jnp.concatenate([_ks_sorted(p, t, probs, n) for p, t, n in zip(picked, tables, sizes)], axis=-1)
 
 
-@functools.partial(jax.jit, static_argnames="shapes")
-def _synthesis_targets(band_q, pixel_q, probs, shapes):
-    """Sorted target values for every subband group and for the pixels, for this output size."""
+def _synthesis_targets(band_q: np.ndarray, pixel_q: np.ndarray, probs: np.ndarray, shapes):
+    """Sorted target values for every subband group and for the pixels, for this output size; and the tables by group."""
     c = band_q.shape[0]
     sizes = [shapes[0][0] * shapes[0][1]] + [s[0] * s[1] for s in shapes[:-1]] + [shapes[-1][0] * shapes[-1][1]]
     starts = np.cumsum([0, 1] + [ORIENTATIONS] * (len(shapes) - 1) + [1])
     groups, tables = [], []
     for g, n in enumerate(sizes):
         t = band_q[:, starts[g] : starts[g + 1]]
-        tables.append(t)
+        tables.append(jnp.asarray(t, jnp.float32))
         groups.append(_targets(t, probs, n))
     pix = _targets(pixel_q.reshape(c, 1, -1), probs, shapes[0][0] * shapes[0][1])
     return tuple(groups), tuple(tables), pix
@@ -1176,11 +1179,11 @@ def synthesize_texture(
         masks = _device_masks((hh, ww), model.height, "float32")
         probs = jnp.asarray(model.probabilities, jnp.float32)
         noise = jax.random.normal(jax.random.key(int(seed)), (c, 1, hh * ww), jnp.float32)
-        per_channel = [  # each channel's sorted targets and tables (one at a time keeps XLA's buffers small)
+        per_channel = [  # each channel's sorted targets and KS tables, by subband group
             _synthesis_targets(
-                jnp.asarray(model.band_quantiles[ch : ch + 1], jnp.float64),
-                jnp.asarray(model.pixel_quantiles[ch : ch + 1], jnp.float64),
-                jnp.asarray(model.probabilities, jnp.float64),
+                np.asarray(model.band_quantiles[ch : ch + 1], np.float64),
+                np.asarray(model.pixel_quantiles[ch : ch + 1], np.float64),
+                np.asarray(model.probabilities, np.float64),
                 shapes,
             )
             for ch in range(c)
