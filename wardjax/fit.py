@@ -182,6 +182,12 @@ class ScanlineFit:
             texture, a slightly wrong lobe shape — where the model-based
             ``A⁻¹ χ²/dof`` assumes independent noise and can be many times too
             small. With fewer than 10 scanlines it falls back to ``"model"``.
+            It still assumes scanlines independent: a texture correlated
+            *across* neighbouring scanlines (a camera image's columns) that the
+            fit partly absorbs into (ρs, α) leaves no trace in the residuals,
+            and both covariances then understate the error (5–7× on the
+            simulated marble); :func:`wardjax.pipeline.texture_field_covariance`
+            accounts for it, and :func:`wardjax.fit_capture` reports that.
             ``"model"``: the Gauss–Newton covariance scaled by χ²/dof.
         """
         model = model or self.model
