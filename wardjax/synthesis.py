@@ -370,15 +370,11 @@ def _rank_host(values, targets, picks, workers: int | None = None):
     picks = [np.asarray(p, np.intp) for p in picks]
     matched = [None if t is None else _aligned_empty(v.shape, np.float32) for v, t in zip(values, targets)]
     picked = [np.empty((*v.shape[:-1], len(p)), np.float32) for v, p in zip(values, picks)]
-    jobs = []
+    jobs = []  # one per row: (values, target, pick, out, picked, positions), all 1-d views
     for v, t, m, pk, p in zip(values, targets, matched, picked, picks):
-        n, r = v.shape[-1], math.prod(v.shape[:-1])
-        pos = np.arange(n, dtype=np.int64) if t is not None else None
-        rows = (v.reshape(r, n), None if t is None else t.reshape(r, n),
-                None if m is None else m.reshape(r, n), pk.reshape(r, len(p)))
-        for j in range(r):
-            jobs.append((rows[0][j], None if t is None else rows[1][j], p, None if m is None else rows[2][j],
-                         rows[3][j], pos))
+        pos = None if t is None else np.arange(v.shape[-1], dtype=np.int64)
+        for j in np.ndindex(v.shape[:-1]):
+            jobs.append((v[j], None if t is None else t[j], p, None if m is None else m[j], pk[j], pos))
     jobs.sort(key=lambda job: -job[0].size)
     workers = min(len(jobs), workers or os.cpu_count() or 1)
     if workers <= 1:
