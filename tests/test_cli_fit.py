@@ -1,5 +1,10 @@
 """``wardjax simulate`` writes a folder the loader reads; ``wardjax fit`` refuses a missing path in one line."""
 
+import json
+import os
+import subprocess
+import sys
+
 import numpy as np
 from click.testing import CliRunner
 
@@ -21,3 +26,23 @@ def test_fit_missing_path_is_one_line(tmp_path):
     res = CliRunner().invoke(main, ["fit", str(tmp_path / "nope"), "--out", str(tmp_path / "o")])
     assert res.exit_code == 2
     assert res.stderr.strip().splitlines() == [f"error: {tmp_path / 'nope'}: no such capture folder"]
+
+
+def test_fit_keeps_compiled_kernels_between_runs(tmp_path):
+    """A second ``wardjax fit`` process reads the compiled kernels the first wrote, with identical results."""
+    cap = tmp_path / "c"
+    wj.simulate_capture(wj.WardParams(rho_d=0.4, rho_s=0.03, alpha_x=0.08, alpha_y=0.08), out=cap, seed=2,
+                        image_size=(160, 120))
+    env = {k: v for k, v in os.environ.items() if k != "WARDJAX_NO_CACHE"}
+    cache = tmp_path / "xla"
+    outs = []
+    for run in ("cold", "warm"):
+        out = tmp_path / run
+        cmd = [sys.executable, "-m", "wardjax.cli", "--cache-dir", str(cache), "fit", str(cap), "--out", str(out)]
+        res = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=600)
+        assert res.returncode == 0, res.stderr
+        if run == "cold":
+            cached = sorted(p.name for p in cache.iterdir())
+            assert any("search_chunk" in n for n in cached), cached
+        outs.append(json.loads((out / "c" / "params.json").read_text()))
+    assert outs[0]["params"] == outs[1]["params"] and outs[0]["stderr"] == outs[1]["stderr"]

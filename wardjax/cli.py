@@ -21,8 +21,34 @@ console = Console()
 
 @click.group(context_settings={"help_option_names": ["-h", "--help"]})
 @click.version_option(package_name="wardjax")
-def main() -> None:
+@click.option("--cache-dir", type=click.Path(file_okay=False, path_type=Path), envvar="WARDJAX_CACHE_DIR",
+              default=None, show_envvar=True,
+              help="Where compiled kernels are kept between runs [default: the user cache folder].")
+@click.option("--no-cache", is_flag=True, envvar="WARDJAX_NO_CACHE", show_envvar=True,
+              help="Compile afresh and keep nothing between runs.")
+def main(cache_dir: Path | None, no_cache: bool) -> None:
     """Measure Ward BRDF parameters from photographs, with honest uncertainties."""
+    if not no_cache:
+        _enable_compile_cache(cache_dir)
+
+
+def _enable_compile_cache(cache_dir: Path | None) -> None:
+    """Keep XLA's compiled programs on disk, so that a second run skips most compilation.
+
+    Compiling the kernels costs tens of seconds per process; JAX's persistent
+    cache makes that a one-time cost per machine and shape. Set here, in the
+    command (the process is ours), never on import of the library.
+    """
+    import jax
+    import platformdirs
+
+    path = Path(cache_dir) if cache_dir else Path(platformdirs.user_cache_dir("wardjax")) / "xla"
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+    except OSError:
+        return  # a read-only home: run without the cache rather than fail
+    jax.config.update("jax_compilation_cache_dir", str(path))
+    jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
 
 
 def _fail(message: str) -> None:
