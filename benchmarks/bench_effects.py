@@ -36,6 +36,8 @@ def capture_sized(n_scan: int = 4000, n_rows: int = 48, seed: int = 0):
 def main(argv=None) -> dict:
     ap = argparse.ArgumentParser(prog="python -m benchmarks.bench_effects")
     ap.add_argument("--draws", type=int, default=10, help="hidden-effect draws per detectable effect")
+    ap.add_argument("--gamma-draws", type=int, default=20,
+                    help="draws of the γ mismatch (its signature is mostly absorbed by the baseline)")
     ap.add_argument("--null", type=int, default=100, help="null draws")
     ap.add_argument("--ool", type=int, default=10, help="out-of-library (orange peel) draws")
     ap.add_argument("--cancelled", type=int, default=3, help="draws per effect that cancels by symmetry")
@@ -52,7 +54,8 @@ def main(argv=None) -> dict:
         print(f"  [{i + 1}/{n}] hidden={row['hidden']:<22} found={row['found']} gap {row['gap_before']:.2f} → "
               f"{row['gap_after']:.3f} ({row['seconds']:.1f} s)", flush=True)
 
-    s = eb.run_bench(a.draws, a.null, out_of_library=a.ool, cancelled=a.cancelled, progress=progress)
+    s = eb.run_bench(a.draws, a.null, out_of_library=a.ool, cancelled=a.cancelled, progress=progress,
+                     draws={"gamma": max(a.draws, a.gamma_draws)})
     print("\nConfusion matrix (rows: hidden effect; columns: first effect named)\n")
     print(eb.bench_table(s))
     ool = [r for r in s["rows"] if r["hidden"] == eb.OUT_OF_LIBRARY]
