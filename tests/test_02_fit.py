@@ -353,3 +353,25 @@ def test_robust_errors_cover_the_truth_when_texture_correlates_the_residuals():
         for name in ("alpha_x", "alpha_y", "rho_s"):
             z = (getattr(c.params, name) - getattr(truth, name)[0]) / getattr(c.stderr, name)
             assert abs(z) < 4, (name, z)
+
+
+def test_float32_cancellation_is_flagged_and_refit_in_float64():
+    """Scanlines where float32 sums cancel (the 31 of 10⁵ benchmark scanlines, tests/data/float32):
+    the float32 kernel never calls its spurious optimum converged, and ``fit_scanlines`` refits
+    them in float64, so float32 ends with no collapsed fit."""
+    from pathlib import Path
+
+    from wardjax import fit as F
+
+    z = np.load(Path(__file__).parent / "data" / "float32" / "hard_scanlines.npz")
+    w = 1.0 / z["sigma"] ** 2
+    data = F._validate(z["f_r"], z["wi"], z["wo"], None, w)
+    raw = F._solve(data, iso=True, normalization="ward1992", solver="fast", dtype=np.dtype(np.float32), chunk=1024)
+    collapsed = np.abs(raw.alpha[:, 0] / z["alpha"] - 1) > 0.5
+    assert collapsed.sum() >= 25  # the float32 kernel alone does fall into it here
+    assert not np.any(collapsed & (raw.status == wj.Status.CONVERGED))
+    res = wj.fit_scanlines(z["f_r"], z["wi"], z["wo"], weights=w, dtype=np.float32)
+    assert np.all(res.ok)
+    assert np.max(np.abs(res.params.alpha_x / z["alpha"] - 1)) < 0.1
+    ref = wj.fit_scanlines(z["f_r"], z["wi"], z["wo"], weights=w)
+    np.testing.assert_allclose(res.params.alpha_x, ref.params.alpha_x, rtol=1e-12)

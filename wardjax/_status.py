@@ -24,7 +24,9 @@ class Status(enum.IntEnum):
         The step budget ran out before that test passed; the parameters are
         the best point found and usually close, but not certified.
     ``NONFINITE``
-        NaN or inf appeared in the parameters, the χ² or the covariance.
+        NaN or inf appeared in the parameters, the χ² or the covariance, or
+        rounding made them invalid (a negative χ² or variance: float32 sums
+        that cancel).
     ``INSUFFICIENT_DATA``
         ``α`` is not identified by the data: too few valid samples, no
         specular lobe detected (it lowers χ² by less than 25 residual

@@ -451,11 +451,14 @@ def solve_scanline(p: Prepared, *, iso: bool, rtol: float) -> ScanlineSolution:
     at_lo = (theta <= lo + 1e-6) & (st.jtr > 0)
     at_hi = (theta >= hi - 1e-6) & (st.jtr < 0)
     at_bound = jnp.any(at_lo | at_hi)
+    # Valid numbers, not only finite ones: in float32 the algebraic centring
+    # can cancel into a negative χ² or variance at a spurious optimum.
     finite = (
         jnp.all(jnp.isfinite(theta))
         & jnp.isfinite(st.chi2)
+        & (st.chi2 >= 0)
         & jnp.all(jnp.isfinite(rho_d))
-        & jnp.all(jnp.isfinite(jnp.diag(cov)))
+        & jnp.all(jnp.isfinite(jnp.diag(cov)) & (jnp.diag(cov) >= 0))
     )
     # Identifiability: the lobe must be detected (likelihood-ratio Δχ² of the
     # lobe against a lobe-free model, in units of the residual variance, at
