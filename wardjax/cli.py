@@ -49,7 +49,6 @@ def _enable_compile_cache(cache_dir: Path | None) -> None:
         return  # a read-only home: run without the cache rather than fail
     jax.config.update("jax_compilation_cache_dir", str(path))
     jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
-    jax.config.update("jax_compilation_cache_max_size", 1 << 30)  # 1 GiB, least recently used evicted
 
 
 def _fail(message: str) -> None:
