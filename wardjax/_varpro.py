@@ -39,10 +39,9 @@ from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
-from jaxtyping import Array, Bool, Float, Int
+from jaxtyping import Array, Float, Int
 
 from ._status import Status
-from .ward import ward_geometry
 
 # Search range of α. Below 1e-4 no camera resolves a lobe; above 2 the lobe is
 # flat over the hemisphere and α no longer has a meaning.
@@ -159,18 +158,13 @@ def prepare(f, u, v, g, w, iso: bool = True) -> Prepared:
 
 
 def basis(theta, u, v, g, iso: bool):
-    """``b`` (N,) and ``(∂b/∂θ) / b`` (k, N) at ``θ`` (log α or (log αx, log αy))."""
+    """``b`` (N,) at ``θ`` (log α or (log αx, log αy)): the specular basis, ``ρs b`` the lobe."""
     if iso:
         inv = jnp.exp(-2.0 * theta[0])
-        t = u + v
-        b = g * jnp.exp(-t * inv) * inv
-        c = (2.0 * t * inv - 2.0)[None, :]
-    else:
-        ix = jnp.exp(-2.0 * theta[0])
-        iy = jnp.exp(-2.0 * theta[1])
-        b = g * jnp.exp(-(u * ix + v * iy) - theta[0] - theta[1])
-        c = jnp.stack([2.0 * u * ix - 1.0, 2.0 * v * iy - 1.0], axis=0)
-    return b, c
+        return g * jnp.exp(-(u + v) * inv) * inv
+    ix = jnp.exp(-2.0 * theta[0])
+    iy = jnp.exp(-2.0 * theta[1])
+    return g * jnp.exp(-(u * ix + v * iy) - theta[0] - theta[1])
 
 
 def _profile(bsum, qsum, psum, wsum, fsum, m, k0):
@@ -414,13 +408,6 @@ def covariance(theta, st: Stats, p: Prepared, scale):
     return cov * scale
 
 
-def prepare_scanline(f, wi, wo, w, *, iso: bool, normalization: str) -> Prepared:
-    """Geometry and moments of one scanline (stage A, vmapped over a chunk)."""
-    geom = ward_geometry(wi, wo, normalization)
-    w = jnp.where(geom.valid[:, None], w, 0.0)
-    return prepare(f.T, geom.u, geom.v, geom.g, w.T, iso)
-
-
 def solve_scanline(p: Prepared, *, iso: bool, rtol: float) -> ScanlineSolution:
     """Search and statistics of one prepared scanline (stage B, vmapped over a chunk)."""
     theta = grid_start(p)
@@ -482,19 +469,4 @@ def solve_scanline(p: Prepared, *, iso: bool, rtol: float) -> ScanlineSolution:
     return ScanlineSolution(rho_d, s, jnp.exp(theta), cov, st.chi2, dof, status.astype(jnp.int32))
 
 
-def fit_chunk(
-    f: Float[Array, "S N 3"],
-    wi: Float[Array, "S N 3"],
-    wo: Float[Array, "S N 3"],
-    w: Float[Array, "S N C"],
-    *,
-    iso: bool,
-    rtol: float,
-    normalization: str,
-) -> ScanlineSolution:
-    """Both stages in one traced function (for tests and tracing; slower under jit, see fit_scanlines)."""
-    p = jax.vmap(lambda *a: prepare_scanline(*a, iso=iso, normalization=normalization))(f, wi, wo, w)
-    return jax.vmap(lambda q: solve_scanline(q, iso=iso, rtol=rtol))(p)
-
-
-__all__ = ["ScanlineSolution", "fit_chunk", "prepare_scanline", "solve_scanline"]
+__all__ = ["Prepared", "ScanlineSolution", "prepare", "solve_scanline"]

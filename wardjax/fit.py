@@ -289,24 +289,19 @@ def _moments_chunk(f, u, v, g, w, *, iso):
     return jax.vmap(lambda *a: _varpro.prepare(*a, iso))(f, u, v, g, w)
 
 
-def _prepare_chunk(f, wi, wo, mask, weights, *, iso, normalization, dtype):
-    # Geometry and moments as separate programs too: ~25 % less CPU than one.
-    parts = _geometry_chunk(f, wi, wo, mask, weights, normalization=normalization, dtype=dtype)
-    return _moments_chunk(*parts, iso=iso)
-
-
 @functools.partial(jax.jit, static_argnames=("iso", "rtol"))
 def _search_chunk(prepared, *, iso, rtol):
     return jax.vmap(lambda p: _varpro.solve_scanline(p, iso=iso, rtol=rtol))(prepared)
 
 
 def _fast_chunk(f, wi, wo, mask, weights, *, iso, rtol, normalization, dtype):
-    prepared = _prepare_chunk(f, wi, wo, mask, weights, iso=iso, normalization=normalization, dtype=dtype)
-    return _search_chunk(prepared, iso=iso, rtol=rtol)
+    # Geometry and moments as separate programs too: ~25 % less CPU than one.
+    parts = _geometry_chunk(f, wi, wo, mask, weights, normalization=normalization, dtype=dtype)
+    return _search_chunk(_moments_chunk(*parts, iso=iso), iso=iso, rtol=rtol)
 
 
-@functools.partial(jax.jit, static_argnames=("normalization", "dtype"))
-def _clean_jit(f, wi, wo, mask, weights, *, normalization, dtype):
+@functools.partial(jax.jit, static_argnames=("dtype",))
+def _clean_jit(f, wi, wo, mask, weights, *, dtype):
     return _clean(f, wi, wo, mask, weights, dtype)
 
 
@@ -454,7 +449,7 @@ def _assemble(sol, data, model, normalization, solver) -> ScanlineFit:
 def _iso_model(y, u, v, g):
     """Model of the full isotropic problem in scaled coordinates y = (ρd RGB, log ρs, log α)."""
     rho_d, log_rs, log_a = y[:3], y[3], y[4]
-    b, _ = _varpro.basis(log_a[None], u, v, g, True)
+    b = _varpro.basis(log_a[None], u, v, g, True)
     f_model = rho_d[None, :] / jnp.pi + jnp.exp(log_rs) * b[:, None]
     return f_model
 
@@ -513,7 +508,7 @@ class _JointArgs(eqx.Module):
 
 def _joint_rho_d(log_rs, theta, a: _JointArgs, iso: bool):
     """Per-scanline profiled ρd (S, 3) and the spec basis (S, N) at given ρs, α."""
-    b = jax.vmap(lambda u, v, g: _varpro.basis(theta, u, v, g, iso)[0])(a.u, a.v, a.g)  # (S, N)
+    b = jax.vmap(lambda u, v, g: _varpro.basis(theta, u, v, g, iso))(a.u, a.v, a.g)  # (S, N)
     rs = jnp.exp(log_rs)
     wsum = jnp.sum(a.w, axis=1)  # (S, C)
     safe = jnp.where(wsum > 0, wsum, 1.0)
@@ -535,7 +530,7 @@ def _combined(res: ScanlineFit, model: str, *, errors: str, max_steps: int, rtol
     k = 1 if iso else 2
     f_c, wi_c, wo_c, w_c = (np.asarray(a) for a in _clean_jit(
         *(None if a is None else jnp.asarray(a) for a in (f, wi, wo, mask, weights)),
-        normalization=res.normalization, dtype=np.dtype(np.float64)))
+        dtype=np.dtype(np.float64)))
     # Every scanline with usable data takes part, including those whose own fit
     # saw no lobe: a scanline beside the highlight says where the lobe is *not*,
     # which is exactly what constrains αx.
@@ -548,7 +543,7 @@ def _combined(res: ScanlineFit, model: str, *, errors: str, max_steps: int, rtol
             nan, nan, np.full((len(res), 3), np.nan), np.full((k + 1, k + 1), np.nan),
             float("nan"), 0, Status.INSUFFICIENT_DATA, 0, model, res.normalization,
         )
-    # Pad the scanline axis to a power of two with zero-weight rows: one compile per bucket.
+    # Pad the scanline axis to a bucket size with zero-weight rows: one compile per bucket.
     rows = _bucket_rows(n_use, 1 << 30)
     sel = [np.asarray(a)[use] for a in (f_c, wi_c, wo_c, w_c)]
     f_p, wi_p, wo_p, w_p = (_pad(a, rows) for a in sel)
@@ -559,8 +554,8 @@ def _combined(res: ScanlineFit, model: str, *, errors: str, max_steps: int, rtol
     # Start: the best of a log-α grid of the joint profiled χ² (for fixed α the
     # joint model is linear in every ρd and the shared ρs), not the per-scanline
     # fits, which a strong texture can spoil.
-    prepared = _prepare_chunk(f_p, wi_p, wo_p, None, w_p, iso=True, normalization=res.normalization,
-                              dtype=np.dtype(np.float64))
+    prepared = _moments_chunk(jnp.swapaxes(args.f, -1, -2), args.u, args.v, args.g, jnp.swapaxes(args.w, -1, -2),
+                              iso=True)  # the geometry above, sample axis last
     log_a, rs0 = (float(v) for v in _joint_grid_start(prepared))
     y = jnp.asarray([math.log(max(rs0, 1e-6))] + [log_a] * k, jnp.float64)
     n_obs = int(np.sum(np.broadcast_to(np.asarray(args.w), args.f.shape) > 0))
