@@ -27,7 +27,6 @@ mirror pixel of column ``u`` is column ``2 cx − u``.
 from __future__ import annotations
 
 import dataclasses
-import functools
 from typing import NamedTuple
 
 import jax
@@ -327,7 +326,7 @@ class BandGeometry(NamedTuple):
 
 
 def rig_constants(rig: Rig, tangent) -> np.ndarray:
-    """The rig as one float64 vector for the compiled kernel (27 numbers)."""
+    """The rig as one float64 vector for the compiled kernel (29 numbers)."""
     cam = rig.camera
     t = np.asarray(tangent, np.float64)
     t = t / np.linalg.norm(t)

@@ -42,7 +42,6 @@ and ``material.rad`` as for the image-based method.
 from __future__ import annotations
 
 import dataclasses
-import hashlib
 from pathlib import Path
 from typing import Annotated, Literal
 
@@ -119,10 +118,6 @@ class SmartphoneCapture:
         return "smartphone"
 
 
-def _sha256(path: Path) -> str:
-    return "sha256:" + hashlib.sha256(path.read_bytes()).hexdigest()
-
-
 def parse_smartphone_file(raw: dict, file: str) -> SmartphoneCaptureFile:
     """Validate a parsed ``capture.toml`` (raises :class:`~wardjax.capture.CaptureError`)."""
     from .capture import CaptureError, _pydantic_error
@@ -149,7 +144,7 @@ def parse_smartphone_file(raw: dict, file: str) -> SmartphoneCaptureFile:
 
 def load_smartphone_capture(folder: Path, cfg: SmartphoneCaptureFile) -> SmartphoneCapture:
     """Load a smartphone capture folder whose ``capture.toml`` validated to ``cfg``."""
-    from .capture import CAPTURE_FILE, CaptureError, read_image
+    from .capture import CAPTURE_FILE, CaptureError, _sha256, read_image
 
     path = folder / cfg.photo.file
     if not path.is_file():
@@ -179,7 +174,8 @@ def fit_smartphone_capture(cap: SmartphoneCapture, out_dir: Path, *, created: st
     they are: the smartphone α is a lobe width from a visual model, not a
     least-squares fit in one normalisation, so there is nothing to refit.
     """
-    from .export import _jsonable, _pdict, _version, radiance_material, radiance_rgb, write_bytes_atomic
+    from .export import (PARAMS_SCHEMA, _jsonable, _pdict, _version, radiance_material, radiance_rgb,
+                         write_bytes_atomic, write_json_atomic)
     from .psychophysics import fit_smartphone
     from .ward import WardParams
 
@@ -207,7 +203,7 @@ def fit_smartphone_capture(cap: SmartphoneCapture, out_dir: Path, *, created: st
     lo68, hi68 = post.interval(0.68)
     lo95, hi95 = post.interval(0.95)
     doc = {
-        "schema": "wardjax.params/1",
+        "schema": PARAMS_SCHEMA,
         "name": cap.name,
         "method": "smartphone",
         "model": "isotropic",
@@ -238,8 +234,6 @@ def fit_smartphone_capture(cap: SmartphoneCapture, out_dir: Path, *, created: st
         "inputs": dict(sorted(cap.checksums.items())),
         "created": created,
     }
-    from .demo import write_json_atomic
-
     doc = _jsonable(doc)
     write_json_atomic(out / "params.json", doc)
     return doc

@@ -86,7 +86,7 @@ def capture_data(cap: Capture, *, max_samples: int = 20_000, band_rows: int = 51
     band_rows
         Rows processed at a time.
     """
-    from ..pipeline import reconstruct_capture
+    from ..pipeline import MIN_SCANLINE_SAMPLES, reconstruct_capture
 
     if cap.method != "scanline":
         raise CaptureError(CAPTURE_FILE, "method", f"diagnose needs method = 'scanline', got {cap.method!r}")
@@ -122,9 +122,9 @@ def capture_data(cap: Capture, *, max_samples: int = 20_000, band_rows: int = 51
     # scanlines = image columns
     F = f_bin.transpose(1, 0, 2)
     WI, WO, P = (geo[k].transpose(1, 0, 2) for k in ("wi", "wo", "pts"))
-    keep = np.sum(np.all(np.isfinite(F), axis=-1), axis=1) >= 8
+    keep = np.sum(np.all(np.isfinite(F), axis=-1), axis=1) >= MIN_SCANLINE_SAMPLES
     if not keep.any():
-        raise CaptureError(cfg.images.lit, None, "no image column holds 8 usable probe values")
+        raise CaptureError(cfg.images.lit, None, f"no image column holds {MIN_SCANLINE_SAMPLES} usable probe values")
     F, WI, WO, P = F[keep], WI[keep], WO[keep], P[keep]
     sigma = _noise_model(F)
     return scanline_data(F, WI, WO, sigma, points=P, lamp=np.asarray(rig.lamp, float), kind="ratio",

@@ -13,11 +13,11 @@ import dataclasses
 import io
 import json
 import math
-import os
-import tempfile
 from pathlib import Path
 
 import numpy as np
+
+from ..export import write_bytes_atomic
 
 __all__ = ["Candidate", "DiscoveryReport", "FitState", "Step"]
 
@@ -357,26 +357,14 @@ class DiscoveryReport:
             fn = "gap.png" if name == "gap" else f"residuals_{name}.png"
             buf = io.BytesIO()
             fig.savefig(buf, format="png", dpi=110)
-            _atomic(out / fn, buf.getvalue())
+            write_bytes_atomic(out / fn, buf.getvalue())
             paths[name] = out / fn
             links[name] = fn
         d = self.to_dict()
         if extra:
             d.update(extra)
-        _atomic(out / "report.json", (json.dumps(d, indent=2, ensure_ascii=False) + "\n").encode())
-        _atomic(out / "report.md", self.to_markdown(links).encode())
+        write_bytes_atomic(out / "report.json", (json.dumps(d, indent=2, ensure_ascii=False) + "\n").encode())
+        write_bytes_atomic(out / "report.md", self.to_markdown(links).encode())
         paths["json"] = out / "report.json"
         paths["md"] = out / "report.md"
         return paths
-
-
-def _atomic(path: Path, data: bytes) -> None:
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            fh.write(data)
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
