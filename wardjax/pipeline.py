@@ -395,7 +395,7 @@ def _reconstruct_band(k, rows, col0, lit, dark, clipped, std, offset, rho, noise
     pts = jnp.where(probe[..., None], pts, jnp.nan)
     wi = jnp.where(probe[..., None], wi, 0.0)
     wo = jnp.where(probe[..., None], wo, 0.0)
-    return f_r, flags, wi, wo, pts, probe
+    return f_r, flags, wi, wo, pts  # which pixels see the probe: the first pass already has it
 
 
 def reconstruct_capture(cap, *, band_rows: int = 512, dtype=np.float32) -> Reconstruction:
@@ -462,7 +462,7 @@ def reconstruct_capture(cap, *, band_rows: int = 512, dtype=np.float32) -> Recon
             dark = zeros if cap.dark is None else pad(cap.dark[sl])
             out = _reconstruct_band(k, jnp.arange(r0, r0 + hb, dtype=dtype), jnp.asarray(cols.start, dtype),
                                     pad(cap.lit[sl]), dark, pad(cap.lit_clipped[sl]), std, offset, rho, nf, **kw)
-            for dst, src in zip((f_r, flags, wi, wo, points, probe), out):
+            for dst, src in zip((f_r, flags, wi, wo, points), out):
                 dst[sl] = np.asarray(src)[:n]
     return Reconstruction(f_r, flags, wi, wo, points, probe)
 
