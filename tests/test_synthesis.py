@@ -153,6 +153,28 @@ def test_03_histogram_matching_is_exact(rng):
     np.testing.assert_array_equal(np.argsort(out, axis=-1, kind="stable"), np.argsort(values, axis=-1, kind="stable"))
 
 
+def test_03_rank_keys_agree_between_numpy_and_xla(rng):
+    """Host (float64 keys) and XLA (integer keys) sorts give the same permutation, ties, ±0 and subnormals included."""
+    from wardjax.synthesis import _rank_match
+
+    v = np.concatenate([np.repeat(rng.standard_normal(40), 5),  # ties among negative and positive values
+                        [0.0, -0.0, 0.0, -0.0, 1e-45, -1e-45, 1e-40, -1e-40, 3e38, -3e38]]).astype(np.float32)
+    v = rng.permutation(v)[None]
+    target = np.sort(rng.standard_normal(v.shape), axis=-1).astype(np.float32)
+    picks = (tuple(range(0, v.shape[-1], 3)),)
+    with jax.enable_x64(True):
+        (m_np,), (p_np,) = _rank_match((v,), (target,), picks, "numpy")
+        (m_xla,), (p_xla,) = _rank_match((v,), (target,), picks, "xla")
+    np.testing.assert_array_equal(np.asarray(m_np), np.asarray(m_xla))
+    np.testing.assert_array_equal(np.asarray(p_np), np.asarray(p_xla))
+    # Order statistics are the sorted values, the sorted output is the target, and the map keeps the order:
+    # v_i < v_j  =>  out_i <= out_j (sort by value, then by output: the outputs come out nondecreasing).
+    out = np.asarray(m_np)[0]
+    np.testing.assert_array_equal(np.asarray(p_np)[0], np.sort(v[0])[list(picks[0])])
+    np.testing.assert_array_equal(np.sort(out), target[0])
+    assert np.all(np.diff(out[np.lexsort((out, v[0]))]) >= 0)
+
+
 def test_03_histogram_matching_ties_and_axis(rng):
     values = np.repeat(rng.standard_normal(50), 4).reshape(50, 4)  # ties everywhere
     out = wj.match_histogram(values, np.linspace(0, 1, 11), axis=0)

@@ -37,7 +37,6 @@ import functools
 import json
 import math
 import os
-import sys
 import tempfile
 from pathlib import Path
 from typing import Literal
@@ -271,21 +270,32 @@ def periodic_smooth_decomposition(image) -> tuple[np.ndarray, np.ndarray]:
 # ============================================================ histogram matching
 #
 # Exact matching gives the k-th smallest of n values the target quantile at
-# probability (k + 1/2) / n. Ranks come from one sort of packed 64-bit keys:
-# the float32 value mapped to an order-preserving uint32 in the high word, the
-# position in the low word. Keys are distinct, so the permutation is unique and
-# deterministic, and the sorted keys also give back the sorted values.
+# probability (k + 1/2) / n. Ranks come from one sort of distinct 64-bit keys
+# that carry the value and the position; the permutation is therefore unique
+# and deterministic, and the sorted keys also give back the sorted values.
 #
 # Where the sort runs. XLA's CPU sort calls a compiled comparator per
-# comparison and is 4-5x slower than NumPy's vectorised (AVX2) sort of the same
-# keys, so on CPU the rank step (pack, sort, scatter the targets into rank
-# order) runs in NumPy, one row per task on a thread pool (NumPy releases the
-# GIL); elsewhere it runs in XLA. Both give the same permutation, hence
+# comparison and is 4-5x slower than NumPy's vectorised (AVX2) sort, so on CPU
+# the rank step (pack, sort, scatter the targets into rank order) runs in
+# NumPy, one row per task on a thread pool (NumPy releases the GIL); elsewhere
+# it runs in XLA. The host keys are float64: a float32 widens exactly with its
+# low 29 mantissa bits zero, and those bits take the position (n ≤ 2²⁹), which
+# NumPy sorts 15 % faster than int64 keys. Ties then come out in increasing
+# position for values with the sign bit clear and in decreasing position for
+# the others (a larger magnitude is a more negative float). XLA's CPU backend
+# flushes subnormals (the widened keys of ±0 are subnormal), so it sorts
+# integer keys built to give that same order: the float32 mapped to an
+# order-preserving uint32 in the high word, the position (complemented where
+# the sign bit is set) in the low word. Both give the same permutation, hence
 # bit-identical results. Arrays cross between JAX and NumPy without copies:
 # ``np.asarray`` views a CPU jax.Array, and ``jax.device_put`` wraps a 64-byte
 # aligned NumPy array (:func:`_aligned_empty`).
 
 SortMethod = Literal["auto", "numpy", "xla"]
+
+_POSITION_BITS = 29  # float64 mantissa bits below a widened float32's
+_MAX_ROW = 1 << _POSITION_BITS
+_POSITION_MASK = np.int64(_MAX_ROW - 1)
 
 
 def _order_key(x: Array) -> Array:
@@ -300,16 +310,19 @@ def _order_key_inverse(k: Array) -> Array:
 
 
 def _pack(x: Float[Array, "... n"]) -> Array:
-    """Sort keys for the last axis: ``order_key(x) << 32 | position``."""
-    pos = jax.lax.broadcasted_iota(jnp.uint64, x.shape, x.ndim - 1)
-    return (_order_key(x).astype(jnp.uint64) << jnp.uint64(32)) | pos
+    """Sort keys for the last axis: ``order_key(x) << 32 | p``, ``p`` the position, complemented if ``x``'s sign bit is set."""
+    pos = jax.lax.broadcasted_iota(jnp.uint32, x.shape, x.ndim - 1)
+    key = _order_key(x)
+    low = jnp.where(key >> 31 == 1, pos, ~pos)  # order_key clears the top bit exactly where the sign bit is set
+    return (key.astype(jnp.uint64) << jnp.uint64(32)) | low.astype(jnp.uint64)
 
 
 def _unpack(keys: Array) -> tuple[Array, Array]:
     """Sorted keys → (positions of the sorted values, the sorted values)."""
-    idx = (keys & jnp.uint64(0xFFFFFFFF)).astype(jnp.int32)
-    vals = _order_key_inverse((keys >> jnp.uint64(32)).astype(jnp.uint32))
-    return idx, vals
+    key = (keys >> jnp.uint64(32)).astype(jnp.uint32)
+    low = (keys & jnp.uint64(0xFFFFFFFF)).astype(jnp.uint32)
+    idx = jnp.where(key >> 31 == 1, low, ~low).astype(jnp.int32)
+    return idx, _order_key_inverse(key)
 
 
 def _scatter(idx: Array, values: Array) -> Array:
@@ -329,38 +342,24 @@ def _aligned_empty(shape: tuple[int, ...], dtype) -> np.ndarray:
     return buf[start : start + nbytes].view(dtype).reshape(shape)
 
 
-def _signed_key_np(s: np.ndarray) -> np.ndarray:
-    """float32 bit patterns (as int32) ↔ int32 keys with the same order under *signed* comparison.
-
-    ``s ^ ((s >> 31) & 0x7FFFFFFF)``: negative floats get their magnitude bits
-    flipped. An involution, so it also maps keys back to bit patterns. It is
-    :func:`_order_key` with the top bit flipped, so it orders values (and
-    ``−0 < +0``) exactly as the XLA keys do.
-    """
-    k = s >> 31  # arithmetic shift: −1 where negative
-    k &= np.int32(0x7FFFFFFF)
-    k ^= s
-    return k
-
-
 def _rank_row(v, target, pick, out, picked, pos) -> None:
     """One row on the host: sorted values at ``pick`` into ``picked``; with ``target``, ``out[rank⁻¹] = target``.
 
-    Keys are ``signed_key(v) · 2³² + position`` as int64 (NumPy's AVX2 sort
-    compares signed 64-bit integers natively, unsigned ones with an extra
-    step). Without a target only order statistics are needed, and sorting the
-    values alone gives the same ones, faster.
+    Keys are ``float64(v)`` with the position in the 29 low mantissa bits
+    (zero after the exact widening), sorted as float64. Without a target only
+    order statistics are needed, and sorting the float32 values gives the
+    same ones, faster.
     """
     if target is None:
         picked[:] = np.sort(v)[pick]
         return
-    keys = _signed_key_np(v.view(np.int32)).astype(np.int64)
-    keys <<= np.int64(32)
-    keys |= pos
+    keys = v.astype(np.float64)
+    bits = keys.view(np.int64)
+    bits |= pos
     keys.sort()
-    low = keys.view(np.uint32)[0 if sys.byteorder == "little" else 1 :: 2]  # the positions, no copy
-    np.put(out, low.astype(np.intp), target)
-    picked[:] = _signed_key_np((keys[pick] >> np.int64(32)).astype(np.int32)).view(np.float32)
+    picked[:] = (bits[pick] & ~_POSITION_MASK).view(np.float64)  # exact: a widened float32
+    bits &= _POSITION_MASK  # the positions, in place: intp indices
+    out[bits] = target  # fancy assignment with intp indices: half the time of np.put here
 
 
 def _rank_host(values, targets, picks, workers: int | None = None):
@@ -546,6 +545,8 @@ def match_histogram(values, quantiles, probabilities=None, *, axis: int = -1) ->
         raise ValueError("quantiles must be finite and nondecreasing along the last axis")
     if not np.isfinite(v).all():
         raise ValueError("values hold NaN or inf")
+    if v.shape[-1] > _MAX_ROW:
+        raise ValueError(f"at most 2**{_POSITION_BITS} values per histogram, got {v.shape[-1]} along axis {axis}")
     p = np.linspace(0.0, 1.0, q.shape[-1]) if probabilities is None else np.asarray(probabilities, np.float64)
     if p.shape != q.shape[-1:] or p[0] != 0 or p[-1] != 1 or np.any(np.diff(p) <= 0):
         raise ValueError(f"probabilities must increase from 0 to 1 with one per quantile ({q.shape[-1]}), got {p!r}")
@@ -835,11 +836,17 @@ def _rho_s_vector(rho_s, channels: int, name: str = "rho_s") -> np.ndarray:
     return r
 
 
-def _pca(pixels: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+@jax.jit
+def _pixel_moments(x: Float[Array, "h w c"]) -> tuple[Float[Array, "c"], Float[Array, "c c"]]:
+    """Mean and sample covariance (divided by ``n − 1``, as ``np.cov``) of the pixels of ``x`` (float64)."""
+    p = x.reshape(-1, x.shape[-1])
+    mean = p.mean(axis=0)
+    p = p - mean[None]
+    return mean, (p.T @ p) / max(1, p.shape[0] - 1)
+
+
+def _pca(mean: np.ndarray, cov: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Mean and orthonormal principal axes (columns, variance descending, largest component positive)."""
-    mean = pixels.mean(axis=0)
-    x = pixels - mean
-    cov = (x.T @ x) / max(1, x.shape[0] - 1)  # the sample covariance (as np.cov), one BLAS product
     evals, evecs = np.linalg.eigh(cov)
     evecs = evecs[:, np.argsort(evals)[::-1]]
     sign = np.sign(evecs[np.argmax(np.abs(evecs), axis=0), np.arange(evecs.shape[1])])
@@ -852,11 +859,12 @@ def _groups(hp, bands, lp, c: int) -> tuple:
 
 
 @functools.partial(jax.jit, static_argnames="shapes")
-def _analysis_groups(d, masks, shapes):
-    """Periodic component of each channel → pyramid → subband groups, then the pixels ``(C, 1, H W)``."""
-    c = d.shape[0]
+def _analysis_groups(x, mean, axis, masks, shapes):
+    """One decorrelated channel ``d = (x − μ) · axis`` (float32) → periodic component → pyramid → subband groups,
+    then the pixels ``(1, 1, H W)``."""
+    d = ((x - mean[None, None]) @ axis).astype(jnp.float32)[None]
     p, _ = periodic_smooth(d)
-    return _groups(*pyramid_build(p, masks, shapes), c) + (d.reshape(c, 1, -1),)
+    return _groups(*pyramid_build(p, masks, shapes), 1) + (d.reshape(1, 1, -1),)
 
 
 def _quantile_picks(n: int, probs: np.ndarray) -> tuple[tuple[int, ...], np.ndarray]:
@@ -913,7 +921,7 @@ def analyze_texture(
     h, w, c = a.shape
     if isinstance(n_quantiles, bool) or not isinstance(n_quantiles, (int, np.integer)) or n_quantiles < 2:
         raise ValueError(f"n_quantiles={n_quantiles!r}, expected an integer >= 2")
-    finite = np.isfinite(a).all(axis=-1)
+    bad = ~np.isfinite(a)
     if region is not None:
         try:
             y0, y1, x0, x1 = (int(v) for v in region)
@@ -921,15 +929,15 @@ def analyze_texture(
             raise ValueError(f"region={region!r}, expected (y0, y1, x0, x1)") from None
         if not (0 <= y0 < y1 <= h and 0 <= x0 < x1 <= w):
             raise ValueError(f"region={tuple(region)!r} is not a non-empty rectangle inside the {h}x{w} image")
-        if not finite[y0:y1, x0:x1].all():
-            n_bad = int((~finite[y0:y1, x0:x1]).sum())
+        if bad[y0:y1, x0:x1].any():
+            n_bad = int(bad[y0:y1, x0:x1].any(axis=-1).sum())
             raise ValueError(f"region={tuple(region)!r} holds {n_bad} NaN/inf pixels; choose a region of valid pixels")
         source = "argument"
-    elif finite.all():
+    elif not bad.any():
         y0, y1, x0, x1 = 0, h, 0, w
         source = "whole image"
     else:
-        y0, y1, x0, x1 = largest_valid_rectangle(finite)
+        y0, y1, x0, x1 = largest_valid_rectangle(~bad.any(axis=-1))
         source = "largest valid rectangle"
     rh, rw = y1 - y0, x1 - x0
     if min(rh, rw) < _MIN_SIDE:
@@ -941,16 +949,14 @@ def analyze_texture(
     height = _check_height(height, (rh, rw), "the analysed region")
     rho_s_vec = _rho_s_vector(rho_s, c)
 
-    pixels = a[y0:y1, x0:x1].reshape(-1, c)
-    mean, basis = _pca(pixels)
-    d = (basis.T @ (pixels - mean).T).reshape(c, rh, rw)  # channel-major directly, no transposed copy
     shapes = pyramid_shapes((rh, rw), height)
     probs = quantile_probabilities(int(n_quantiles))
     with jax.enable_x64(True):
+        x = jnp.asarray(a[y0:y1, x0:x1], jnp.float64)
+        mean, basis = _pca(*(np.asarray(m) for m in _pixel_moments(x)))
         masks = _device_masks((rh, rw), height, "float32")
-        d32 = jnp.asarray(d, jnp.float32)
         # One channel per XLA program (small buffers); XLA builds the next channel while the host sorts one.
-        per_channel = [_analysis_groups(d32[ch : ch + 1], masks, shapes) for ch in range(c)]
+        per_channel = [_analysis_groups(x, mean, basis[:, ch], masks, shapes) for ch in range(c)]
         picks = [_quantile_picks(g.shape[-1], probs) for g in per_channel[0]]
         picked = [_rank_match(groups, None, tuple(p for p, _ in picks))[1] for groups in per_channel]
     tables = []  # quantile = x_(i0) (1 − λ) + x_(i1) λ
@@ -1024,9 +1030,8 @@ def _band_ks(picked, tables, probs, sizes):
     return jnp.concatenate([_ks_sorted(p, t, probs, n) for p, t, n in zip(picked, tables, sizes)], axis=-1)
 
 
-def _synthesis_targets(band_q: np.ndarray, pixel_q: np.ndarray, probs: np.ndarray, shapes):
-    """Sorted target values for every subband group and for the pixels, for this output size; and the tables by group."""
-    c = band_q.shape[0]
+def _band_targets(band_q: np.ndarray, probs: np.ndarray, shapes):
+    """Sorted target values for every subband group at this output size, and the quantile tables by group."""
     sizes = [shapes[0][0] * shapes[0][1]] + [s[0] * s[1] for s in shapes[:-1]] + [shapes[-1][0] * shapes[-1][1]]
     starts = np.cumsum([0, 1] + [ORIENTATIONS] * (len(shapes) - 1) + [1])
     groups, tables = [], []
@@ -1034,29 +1039,36 @@ def _synthesis_targets(band_q: np.ndarray, pixel_q: np.ndarray, probs: np.ndarra
         t = band_q[:, starts[g] : starts[g + 1]]
         tables.append(jnp.asarray(t, jnp.float32))
         groups.append(_targets(t, probs, n))
-    pix = _targets(pixel_q.reshape(c, 1, -1), probs, shapes[0][0] * shapes[0][1])
-    return tuple(groups), tuple(tables), pix
+    return tuple(groups), tuple(tables)
 
 
-def _heeger_bergen(noise, targets, tables, pix_targets, probs, masks, shapes, iterations: int, sort: SortMethod):
-    """The iterations of :func:`synthesize_texture`, channel by channel (``noise`` is ``(C, 1, H W)``).
+def _heeger_bergen(rng, band_q, pixel_q, probs64, masks, shapes, iterations: int, sort: SortMethod):
+    """The iterations of :func:`synthesize_texture`, channel by channel, from the noise of ``rng`` (a NumPy Generator).
 
     Per channel: ``d ← match(noise, pixels)``; then ``iterations`` times: pyramid
     of ``d``, every subband ``← match(subband, its targets)``,
     ``d ← match(collapse, pixels)``; and a last pyramid to measure the final
-    distance. ``targets``, ``tables``, ``pix_targets`` hold one entry per
-    channel (:func:`_synthesis_targets` of that channel).
+    distance. ``band_q`` ``(C, B, Q)``, ``pixel_q`` ``(C, Q)`` and ``probs64``
+    are the model's tables (float64).
 
     The channels are independent, so they are interleaved: while the host ranks
     one channel's subbands, XLA builds or collapses another's pyramid
-    (asynchronous dispatch). Returns the ``C`` channels ``(1, 1, H W)`` and the
-    KS distances ``(iterations + 1, C, B)``, the first for the starting noise.
+    (asynchronous dispatch); the subband targets are interpolated while XLA
+    builds the first pyramids. Returns the ``C`` channels ``(1, 1, H W)`` and
+    the KS distances ``(iterations + 1, C, B)``, the first for the starting noise.
     """
-    c = noise.shape[0]
+    c, n_pix = pixel_q.shape[0], shapes[0][0] * shapes[0][1]
+    probs = jnp.asarray(probs64, jnp.float32)
+    pix_targets, ds, groups = [], [], []
+    for ch in range(c):
+        noise = rng.standard_normal((1, 1, n_pix), dtype=np.float32)  # channel by channel: the same stream as (C, n)
+        pix_targets.append(_targets(pixel_q[ch : ch + 1, None], probs64, n_pix))
+        (d,), _ = _rank_match((noise,), (pix_targets[ch],), ((),), sort)
+        ds.append(d)
+        groups.append(_build_groups(d, masks, shapes))  # dispatched: runs while the next channel is ranked
+    targets, tables = zip(*(_band_targets(band_q[ch : ch + 1], probs64, shapes) for ch in range(c)))
     sizes = tuple(t.shape[-1] for t in targets[0])
     ks_picks = tuple(_ks_picks(n) for n in sizes)
-    ds = [_rank_match((noise[ch : ch + 1],), (pix_targets[ch],), ((),), sort)[0][0] for ch in range(c)]
-    groups = [_build_groups(d, masks, shapes) for d in ds]
     ks = [[] for _ in range(c)]
     for it in range(iterations + 1):
         last = it == iterations  # the final pyramid only measures the distance: sort, no matching
@@ -1073,31 +1085,45 @@ def _heeger_bergen(noise, targets, tables, pix_targets, probs, masks, shapes, it
     return ds, ks
 
 
-def _decorrelate(d: np.ndarray) -> np.ndarray:
-    """Remove the chance correlation between independently synthesised channels (``(C, H, W)``).
+@jax.jit
+def _channel_moments(ds):
+    """Mean ``(C,)`` and covariance ``(C, C)`` (float64, divided by ``n``) of the channels ``ds`` (each ``(1, 1, n)``)."""
+    x = jnp.concatenate([d.reshape(1, -1) for d in ds]).astype(jnp.float64)
+    mu = x.mean(axis=1)
+    x = x - mu[:, None]
+    return mu, (x @ x.T) / x.shape[1]
 
-    ``d' = μ + T^{1/2} S^{−1/2} (d − μ)`` with ``S`` the channels' sample
-    covariance and ``T = diag(S)``: afterwards the covariance is exactly
-    diagonal, each channel keeps its variance, and ``S^{−1/2}`` (symmetric) is
-    the whitening closest to the identity, so the channels change as little as
-    possible. Without this, the RGB variance of a texture with strong low
-    frequencies misses the source's by a few per cent (few independent samples
-    of the coarse scales make the sample correlation of independent fields
-    non-zero). Channels with (near) zero variance are left alone.
+
+def _decorrelation(cov: np.ndarray) -> np.ndarray:
+    """Linear map ``W`` that removes the chance correlation between independently synthesised channels.
+
+    ``W = T^{1/2} S^{−1/2}`` with ``S`` the channels' sample covariance and
+    ``T = diag(S)``, applied to the centred channels: afterwards the covariance
+    is exactly diagonal, each channel keeps its variance, and ``S^{−1/2}``
+    (symmetric) is the whitening closest to the identity, so the channels
+    change as little as possible. Without this, the RGB variance of a texture
+    with strong low frequencies misses the source's by a few per cent (few
+    independent samples of the coarse scales make the sample correlation of
+    independent fields non-zero). Channels with (near) zero variance are left
+    alone (identity rows and columns).
     """
-    c = d.shape[0]
-    flat = d.reshape(c, -1)
-    mu = flat.mean(axis=1, keepdims=True)
-    x = flat - mu
-    var = np.einsum("cn,cn->c", x, x) / x.shape[1]
+    c = cov.shape[0]
+    var = np.diag(cov).copy()
+    w = np.eye(c)
     live = np.flatnonzero(var > 1e-12 * max(var.max(), np.finfo(np.float64).tiny))
     if live.size < 2:
-        return d
-    s = (x[live] @ x[live].T) / x.shape[1]
-    evals, evecs = np.linalg.eigh(s)
-    inv_sqrt = (evecs / np.sqrt(evals)) @ evecs.T
-    x[live] = (np.sqrt(var[live])[:, None] * inv_sqrt) @ x[live]
-    return (x + mu).reshape(d.shape)
+        return w
+    evals, evecs = np.linalg.eigh(cov[np.ix_(live, live)])
+    w[np.ix_(live, live)] = np.sqrt(var[live])[:, None] * ((evecs / np.sqrt(evals)) @ evecs.T)
+    return w
+
+
+@jax.jit
+def _to_rgb(ds, mix, offset, upper):
+    """``clip(mix d + offset, 0, upper)`` per pixel, channels last: ``(n, K)`` float32."""
+    d = jnp.concatenate([x.reshape(1, -1) for x in ds])
+    rgb = jnp.einsum("kc,cn->nk", mix.astype(d.dtype), d) + offset.astype(d.dtype)[None]
+    return jnp.clip(rgb, 0.0, upper.astype(d.dtype)[None])
 
 
 def synthesize_texture(
@@ -1134,7 +1160,7 @@ def synthesize_texture(
         ``(height, width)`` in pixels, NumPy order (the CLI's ``--size`` is
         ``WIDTHxHEIGHT``); each side at least ``2 ** (model.height + 2)``.
     seed
-        Seed of the noise (``jax.random.key``).
+        Seed of the noise (NumPy's ``default_rng``: the same image on every backend).
     iterations
         Histogram-matching iterations (≥ 1; the paper used 3).
     rho_s
@@ -1155,6 +1181,8 @@ def synthesize_texture(
         raise ValueError(f"shape={shape!r}, expected (height, width)") from None
     if (hh, ww) != tuple(shape) or min(hh, ww) < 1:
         raise ValueError(f"shape={shape!r}, expected two positive integers (height, width)")
+    if hh * ww > _MAX_ROW:
+        raise ValueError(f"shape={shape!r} has {hh * ww} pixels; at most 2**{_POSITION_BITS} can be synthesised")
     need = 2 ** (model.height + 2)
     if min(hh, ww) < need:
         raise ValueError(
@@ -1173,23 +1201,21 @@ def synthesize_texture(
 
     with jax.enable_x64(True):
         masks = _device_masks((hh, ww), model.height, "float32")
-        probs = jnp.asarray(model.probabilities, jnp.float32)
-        noise = jax.random.normal(jax.random.key(int(seed)), (c, 1, hh * ww), jnp.float32)
-        per_channel = [  # each channel's sorted targets and KS tables, by subband group
-            _synthesis_targets(
-                np.asarray(model.band_quantiles[ch : ch + 1], np.float64),
-                np.asarray(model.pixel_quantiles[ch : ch + 1], np.float64),
-                np.asarray(model.probabilities, np.float64),
-                shapes,
-            )
-            for ch in range(c)
-        ]
-        targets, tables, pix_targets = zip(*per_channel)
-        ds, ks = _heeger_bergen(noise, targets, tables, pix_targets, probs, masks, shapes, iterations, sort)
-        channels = [np.asarray(d, np.float64).reshape(hh, ww) for d in ds]
-        d = _decorrelate(np.stack(channels))
-    rgb = np.einsum("kc,chw->hwk", model.pca_basis, d) + model.pca_mean
-    rgb = np.clip(rgb, 0.0, 1.0 - rs).astype(np.float32)
+        ds, ks = _heeger_bergen(
+            np.random.default_rng(int(seed)),
+            np.asarray(model.band_quantiles, np.float64),
+            np.asarray(model.pixel_quantiles, np.float64),
+            np.asarray(model.probabilities, np.float64),
+            masks,
+            shapes,
+            iterations,
+            sort,
+        )
+        mu, cov = (np.asarray(a) for a in _channel_moments(ds))
+        # x = V (μ + W (d − μ)) + m: decorrelate, back to RGB, clamp, in one pass over the pixels.
+        mix = model.pca_basis @ _decorrelation(cov)
+        offset = model.pca_basis @ mu - mix @ mu + model.pca_mean
+        rgb = np.array(_to_rgb(tuple(ds), mix, offset, 1.0 - np.asarray(rs, np.float64))).reshape(hh, ww, c)
     return SynthesisResult(
         image=rgb,
         distance=ks[1:].max(axis=(1, 2)),
