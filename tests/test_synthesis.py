@@ -136,6 +136,19 @@ def test_02_periodic_smooth_decomposition(rng):
     assert np.abs(wj.periodic_smooth_decomposition(np.full((8, 9), 0.7))[1]).max() < 1e-15
 
 
+@pytest.mark.parametrize("shape", [(37, 50), (33, 17), (64, 64)])
+def test_02_periodic_spectrum_is_the_dft_of_the_periodic_part(rng, shape):
+    """Analysis takes p's spectrum from two 1-D DFTs of the border jumps; it must equal rfft2 of the 2-D route."""
+    from wardjax._pyramid import periodic_spectrum
+
+    u = rng.standard_normal((2, *shape)).cumsum(axis=1).cumsum(axis=2)
+    p = np.stack([wj.periodic_smooth_decomposition(x)[0] for x in u])
+    with jax.enable_x64(True):
+        got = np.asarray(periodic_spectrum(jax.numpy.asarray(u)))
+    want = np.fft.rfft2(p) / (shape[0] * shape[1])
+    np.testing.assert_allclose(got, want, atol=1e-12 * np.abs(want).max())
+
+
 # ============================================================ 3. histogram matching
 
 

@@ -36,7 +36,9 @@ __all__ = [
     "ORIENTATIONS",
     "max_pyramid_height",
     "periodic_smooth",
+    "periodic_spectrum",
     "pyramid_build",
+    "pyramid_build_spectrum",
     "pyramid_masks",
     "pyramid_reconstruct",
     "pyramid_shapes",
@@ -151,8 +153,12 @@ def pyramid_build(
     ``Z_{l+1} = crop(Z_l) lo_l``; the low-pass residual is ``IDFT(Z_height)``.
     ``masks`` must be :func:`pyramid_masks` for ``shapes`` in ``x``'s dtype.
     """
+    return pyramid_build_spectrum(jnp.fft.rfft2(x, norm="forward"), masks, shapes)
+
+
+def pyramid_build_spectrum(spec, masks: dict, shapes: tuple[tuple[int, int], ...]):
+    """:func:`pyramid_build` from ``X = rfft2(x, norm="forward")`` (``(C, H, W//2+1)``) instead of ``x``."""
     big = shapes[0]
-    spec = jnp.fft.rfft2(x, norm="forward")
     highpass = jnp.fft.irfft2(spec * masks["hi0"][None], s=big, norm="forward")
     z = spec * masks["lo0"][None]
     bands = []
@@ -189,6 +195,29 @@ def pyramid_reconstruct(
         z = _pad(z * masks["lo"][level][None], shapes[level]) + (-1j) * band_spec
     spec = z * masks["lo0"][None] + jnp.fft.rfft2(highpass, norm="forward") * masks["hi0"][None]
     return jnp.fft.irfft2(spec, s=shapes[0], norm="forward")
+
+
+@jax.jit
+def periodic_spectrum(u: Float[Array, "c h w"]):
+    """``rfft2(p, norm="forward")`` of the periodic component ``p`` of :func:`periodic_smooth`, without forming ``s``.
+
+    The border-jump image ``v`` is zero inside, so its DFT is a sum of two
+    rank-one terms of 1-D DFTs: with ``dy = u[−1, :] − u[0, :]`` and
+    ``dx = u[:, −1] − u[:, 0]``,
+    ``v̂(q, r) = (1 − e^{2πi q/N}) DFT(dy)(r) + DFT(dx)(q) (1 − e^{2πi r/M})``;
+    then ``p̂ = û − v̂ / (2 cos(2π q/N) + 2 cos(2π r/M) − 4)`` with ``p̂(0, 0) = û(0, 0)``.
+    Two 1-D transforms replace the 2-D pair of :func:`periodic_smooth`.
+    """
+    n, m = u.shape[-2:]
+    dy = jnp.fft.rfft(u[:, -1, :] - u[:, 0, :])  # (c, m//2+1)
+    dx = jnp.fft.fft(u[:, :, -1] - u[:, :, 0])  # (c, n)
+    tq = 2.0 * jnp.pi * jnp.fft.fftfreq(n, dtype=u.dtype)
+    tr = 2.0 * jnp.pi * jnp.fft.rfftfreq(m, dtype=u.dtype)
+    v_hat = (1.0 - jnp.exp(1j * tq))[None, :, None] * dy[:, None, :] + dx[:, :, None] * (1.0 - jnp.exp(1j * tr))[None, None, :]
+    den = 2.0 * jnp.cos(tq)[:, None] + 2.0 * jnp.cos(tr)[None, :] - 4.0
+    den = den.at[0, 0].set(1.0)
+    s_hat = (v_hat / den[None]).at[:, 0, 0].set(0.0)
+    return (jnp.fft.rfft2(u) - s_hat) / (n * m)
 
 
 @jax.jit

@@ -25,8 +25,8 @@ Numerics: the pyramid runs in the input's float dtype (float64 for the
 in float32 (a ρd texture needs no more). Exact histogram matching needs a full
 sort of every subband: on CPU it is done by NumPy on a thread pool (XLA's CPU
 sort is 4-5 times slower), on other backends by ``jax.lax.sort``; both sort
-the same distinct keys, so they give the same permutation and identical
-results. Synthesis handles one channel per XLA program and interleaves the
+distinct keys in the same order, so they give the same permutation and
+identical results. Synthesis handles one channel per XLA program and interleaves the
 channels, so the host sorts one while XLA transforms another.
 """
 
@@ -51,7 +51,9 @@ from ._pyramid import (
     ORIENTATIONS,
     max_pyramid_height,
     periodic_smooth,
+    periodic_spectrum,
     pyramid_build,
+    pyramid_build_spectrum,
     pyramid_masks,
     pyramid_reconstruct,
     pyramid_shapes,
@@ -433,18 +435,28 @@ def _rank_match(values, targets, picks, method: SortMethod = "auto"):
 def _targets(table: np.ndarray, probs: np.ndarray, n: int) -> jax.Array:
     """Target sorted values: the quantile function (piecewise linear through ``(probs, table)``) at ``(k + 1/2) / n``.
 
-    ``table`` is ``(..., q)``; returns float32 ``(..., n)``. Interpolated in
-    float64 (near p = 1 the quantile function is steep and a float32 probability
-    would cost ~1e-5 relative in the tail), by ``np.interp``: ten times faster
-    than XLA's ``jnp.interp`` on CPU, and computed once per synthesis.
+    ``table`` is ``(..., q)``; returns float32 ``(..., n)``. Computed in
+    float64 (near p = 1 the quantile function is steep and a float32
+    probability would cost ~1e-5 relative in the tail). The points
+    ``t_k = (k + 1/2) / n`` are sorted, so each segment ``[p_j, p_{j+1})`` of
+    the table holds a run of them, found once by ``searchsorted``; then
+    ``Q(t_k) = table_j + slope_j (t_k − p_j)`` is two ``np.repeat`` and two
+    in-place passes per row, four times faster than ``np.interp``'s search per
+    point (and ten times faster than XLA's ``jnp.interp`` on CPU).
     """
     table = np.asarray(table, np.float64)
     probs = np.asarray(probs, np.float64)
     t = (np.arange(n, dtype=np.float64) + 0.5) / n
+    runs = np.diff(np.searchsorted(t, probs))  # points in each segment; they sum to n since p_0 = 0, p_{q-1} = 1
+    t -= np.repeat(probs[:-1], runs)
     flat = table.reshape(-1, table.shape[-1])
+    slopes = np.diff(flat, axis=-1) / np.diff(probs)
     out = _aligned_empty((flat.shape[0], n), np.float32)
-    for row, o in zip(flat, out):
-        o[:] = np.interp(t, probs, row)
+    for row, slope, o in zip(flat, slopes, out):
+        v = np.repeat(slope, runs)
+        v *= t
+        v += np.repeat(row[:-1], runs)
+        o[:] = v
     return jax.device_put(out.reshape(*table.shape[:-1], n))
 
 
@@ -863,8 +875,7 @@ def _analysis_groups(x, mean, axis, masks, shapes):
     """One decorrelated channel ``d = (x − μ) · axis`` (float32) → periodic component → pyramid → subband groups,
     then the pixels ``(1, 1, H W)``."""
     d = ((x - mean[None, None]) @ axis).astype(jnp.float32)[None]
-    p, _ = periodic_smooth(d)
-    return _groups(*pyramid_build(p, masks, shapes), 1) + (d.reshape(1, 1, -1),)
+    return _groups(*pyramid_build_spectrum(periodic_spectrum(d), masks, shapes), 1) + (d.reshape(1, 1, -1),)
 
 
 def _quantile_picks(n: int, probs: np.ndarray) -> tuple[tuple[int, ...], np.ndarray]:
