@@ -182,3 +182,38 @@ def test_flagged_clipped_values_are_censored_not_dropped():
     assert abs(a / case.truth["alpha"] - 1) < 0.05
     with pytest.raises(ValueError, match="censored must have shape"):
         scanline_data(y, d.wi, d.wo, d.sigma, censored=flags[:, :5])
+
+
+def test_capture_clipped_probe_pixels_are_censored_not_dropped(tmp_path):
+    """On a capture whose highlight clips (the standard does not), diagnose's data keep the clipped probe pixels
+    as censored lower bounds (they were dropped, so the saturation effect could never apply to a capture), the
+    unclipped values are those of the reconstruction unchanged, and discovery names saturation and recovers α."""
+    from wardjax.effects import discover
+    from wardjax.effects._capture import capture_data
+    from wardjax.pipeline import MIN_SCANLINE_SAMPLES, reconstruct_capture
+
+    p = wj.WardParams(rho_d=(0.35, 0.4, 0.45), rho_s=0.02, alpha_x=0.06, alpha_y=0.06)
+    cap = wj.simulate_capture(p, tmp_path / "clip", seed=5, image_size=(96, 72), texture="none", headroom=1.4)
+    d = capture_data(cap)  # 96 × 72: b = 1, each value one pixel
+    assert d.censored is not None
+    cens, m, y = np.asarray(d.censored), np.asarray(d.mask), np.asarray(d.y)
+    assert 30 < cens.sum() < 0.05 * d.n_obs
+    rec = reconstruct_capture(cap, dtype=np.float64, clip_bounds=True)
+    box = np.ix_(rec.probe.any(axis=1), rec.probe.any(axis=0))
+    f_img, c_img = (a[box].transpose(1, 0, 2) for a in (rec.f_r, rec.f_clip))  # (columns, rows, 3)
+    keep = np.sum(np.all(np.isfinite(f_img), axis=-1), axis=1) >= MIN_SCANLINE_SAMPLES
+    f_img, c_img = f_img[keep], c_img[keep]
+    np.testing.assert_array_equal(m & ~cens, np.isfinite(f_img))
+    np.testing.assert_array_equal(y[m & ~cens], f_img[np.isfinite(f_img)])
+    np.testing.assert_array_equal(cens, np.isfinite(c_img))
+    np.testing.assert_array_equal(y[cens], c_img[cens])
+    # each bound is the clip level: below the true BRDF of its pixel
+    with jax.enable_x64(True):
+        truth = np.asarray(wj.ward_brdf(wj.WardParams(jnp.asarray(np.asarray(p.rho_d, float)), 0.02, 0.06, 0.06),
+                                        jnp.asarray(d.wi), jnp.asarray(d.wo)))
+    assert np.all(y[cens] < truth[cens])
+    sat = get_effect("saturation")
+    assert sat.applicable(d) is None
+    rep = discover(ScanlineModel(), d, max_steps=1, keep_plot_data=False)
+    assert rep.found == ["saturation"] and rep.gap[1] < 1.1 < rep.gap[0]
+    assert abs(rep.final.values["model"]["alpha"] / 0.06 - 1) < 0.03

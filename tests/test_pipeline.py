@@ -236,3 +236,27 @@ def test_fused_reconstruction_equals_the_numpy_reference(tmp_path, dtype):
     assert np.all(np.isnan(rec.f_r[~inp])) and np.all(rec.wi[~inp] == 0)
     np.testing.assert_allclose(rec.wi[inp], to_material_frame(g.wi[inp], (0.8, 0.6)), atol=1e-6)
     np.testing.assert_allclose(rec.points[inp], g.points[inp], atol=1e-3)
+
+
+def test_binning_censors_a_bin_holding_a_clipped_pixel():
+    # _bin_scanlines (fit_capture's and diagnose's binning): a bin with a clipped pixel is censored, its value the
+    # mean of its values and clip bounds (a lower bound on its true mean); otherwise the mean of at least b²/2 values.
+    from wardjax.pipeline import Reconstruction, _bin_scanlines
+
+    nan = np.nan
+    f = np.array([[1.0, 2.0, 5.0, nan, 1.0, nan, 3.0, nan],
+                  [3.0, nan, 1.0, nan, nan, nan, nan, nan]])  # 2 × 8 pixels, bins of 2 × 2
+    clip = np.array([[nan, nan, nan, 9.0, nan, nan, nan, nan],
+                     [nan, nan, nan, nan, nan, nan, nan, 7.0]])
+    rgb = lambda a: np.repeat(a[..., None], 3, -1)  # noqa: E731
+    wi = np.broadcast_to([0.0, 0.6, 0.8], (2, 8, 3)).copy()
+    pts = np.zeros((2, 8, 3))
+    rec = Reconstruction(rgb(f), np.zeros((2, 8), np.uint8), wi, wi, pts, np.ones((2, 8), bool), rgb(clip))
+    got = _bin_scanlines(rec, max_samples=4)  # 16 pixels, ≤ 4 bins: b = 2
+    assert got.b == 2 and got.f_r.shape == (4, 1, 3)
+    np.testing.assert_array_equal(got.f_r[:, 0, 0], [2.0, 5.0, nan, 5.0])
+    np.testing.assert_array_equal(got.censored[:, 0, 0], [False, True, False, True])
+    plain = _bin_scanlines(rec._replace(f_clip=None), max_samples=4)  # without bounds: what fit_capture sees
+    np.testing.assert_array_equal(plain.f_r[:, 0, 0], [2.0, 3.0, nan, nan])
+    assert not plain.censored.any()
+    np.testing.assert_allclose(got.wi, np.broadcast_to([0.0, 0.6, 0.8], (4, 1, 3)))

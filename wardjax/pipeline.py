@@ -330,6 +330,11 @@ class Reconstruction(NamedTuple):
         ``(H, W, 3)`` sample-plane positions (mm); NaN off the probe.
     probe
         ``(H, W)`` the pixel sees the probe.
+    f_clip
+        ``(H, W, 3)`` where the pixel's own lit value is clipped (and nothing
+        else masks it), the clip level as a BRDF value: a lower bound on the
+        true ``f_r`` there (``f_r`` itself is NaN, flagged ``SATURATED``); NaN
+        elsewhere. ``None`` unless asked for (``clip_bounds=True``).
     """
 
     f_r: np.ndarray
@@ -338,6 +343,12 @@ class Reconstruction(NamedTuple):
     wo: np.ndarray
     points: np.ndarray
     probe: np.ndarray
+    f_clip: np.ndarray | None = None
+
+    @property
+    def censored(self) -> np.ndarray | None:
+        """``(H, W, 3)`` bool: :attr:`f_clip` holds a bound (a censored observation); ``None`` without it."""
+        return None if self.f_clip is None else np.isfinite(self.f_clip)
 
 
 def _sample_bilinear_jnp(image, uv):
@@ -368,8 +379,8 @@ def _masks_kernel(k, rows, *, width: int, height: int):
 
 
 @functools.partial(jax.jit, static_argnames=("width", "height", "ncols"))
-def _reconstruct_band(k, rows, col0, lit, dark, clipped, std, offset, rho, noise_floor, *, width: int, height: int,
-                      ncols: int):
+def _reconstruct_band(k, rows, col0, lit, dark, clipped, std, offset, rho, noise_floor, saturation, *, width: int,
+                      height: int, ncols: int):
     """Geometry, mirror sampling and eq. "f_r,measured" of a band of rows, fused (dtype of ``k``).
 
     The same computation as :func:`~wardjax.geometry.pixel_geometry`,
@@ -378,6 +389,16 @@ def _reconstruct_band(k, rows, col0, lit, dark, clipped, std, offset, rho, noise
     tested equal). ``std`` is the cropped standard ``(h', w', 9)``: lit,
     dark, clipped; ``offset`` its ``(u, v)`` origin in the image. Only
     columns ``col0 … col0 + ncols − 1`` (those through the probe).
+
+    Also the clip bound of each probe pixel whose *own* lit value is clipped
+    and which nothing else masks (its mirror point unclipped, on the
+    standard, above the noise floor): the true lit value is at least
+    ``saturation`` (the capture's clip level), so
+
+    .. math:: f_r ≥ \frac{v_{sat} − v_{bg}}{v_{std} − v_{std,bg}} \frac{ρ_{std}}{π},
+
+    a censored observation; NaN elsewhere. A clipped mirror point gives no
+    bound (it underestimates the denominator).
     """
     pts, wi, wo, probe, _, muv, mok = band_geometry_jnp(k, rows, width=width, height=height, col0=col0, ncols=ncols)
     sampled, clip_std = _sample_bilinear_jnp(std, muv - offset[None, None, :])
@@ -391,14 +412,17 @@ def _reconstruct_band(k, rows, col0, lit, dark, clipped, std, offset, rho, noise
           | u8(finite & ((num < noise_floor) | (den < noise_floor) | (den <= 0)), MaskReason.BELOW_NOISE))
     ok = (fl == 0) & probe[..., None]
     f_r = jnp.where(ok, num / jnp.where(ok, den, 1.0) * (rho / jnp.pi)[None, None, :], jnp.nan)
+    num_sat = saturation - dark.astype(k.dtype)
+    bound = (clipped & ~clip_std & (fl == MaskReason.SATURATED) & (num_sat >= noise_floor)) & probe[..., None]
+    f_clip = jnp.where(bound, num_sat / jnp.where(bound, den, 1.0) * (rho / jnp.pi)[None, None, :], jnp.nan)
     flags = jnp.where(probe, fl[..., 0] | fl[..., 1] | fl[..., 2], jnp.uint8(0))
     pts = jnp.where(probe[..., None], pts, jnp.nan)
     wi = jnp.where(probe[..., None], wi, 0.0)
     wo = jnp.where(probe[..., None], wo, 0.0)
-    return f_r, flags, wi, wo, pts  # which pixels see the probe: the first pass already has it
+    return f_r, flags, wi, wo, pts, f_clip  # which pixels see the probe: the first pass already has it
 
 
-def reconstruct_capture(cap, *, band_rows: int = 512, dtype=np.float32) -> Reconstruction:
+def reconstruct_capture(cap, *, band_rows: int = 512, dtype=np.float32, clip_bounds: bool = False) -> Reconstruction:
     """Reconstruct ``f_r`` for every probe pixel of a ``method = "scanline"`` capture.
 
     Two passes over bands of ``band_rows`` rows, each one compiled program
@@ -412,6 +436,9 @@ def reconstruct_capture(cap, *, band_rows: int = 512, dtype=np.float32) -> Recon
     (:func:`~wardjax.reconstruct_brdf`), fused. ``dtype`` sets the storage
     and the precision (float32 keeps a 12 MP capture in memory and is ~10⁻⁴
     px accurate in the mirror mapping; float64 for the effects workflow).
+    ``clip_bounds`` also keeps :attr:`Reconstruction.f_clip`, the lower
+    bound of every probe pixel clipped by the sensor (censored data for
+    :func:`wardjax.effects.discover`; one more image in memory).
     """
     cfg, rig = cap.config, cap.rig
     cam = rig.camera
@@ -424,6 +451,7 @@ def reconstruct_capture(cap, *, band_rows: int = 512, dtype=np.float32) -> Recon
     points = np.full((h, w, 3), np.nan, dtype)
     flags = np.zeros((h, w), np.uint8)
     probe = np.zeros((h, w), bool)
+    f_clip = np.full((h, w, 3), np.nan, dtype) if clip_bounds else None
     on_std = np.empty((h, w), bool)
     dims = {"width": w, "height": h}
 
@@ -438,7 +466,7 @@ def reconstruct_capture(cap, *, band_rows: int = 512, dtype=np.float32) -> Recon
             probe[r0:r1], on_std[r0:r1] = np.asarray(pm)[: r1 - r0], np.asarray(sm)[: r1 - r0]
         pbox = _bbox(probe, 0)
         if pbox is None:
-            return Reconstruction(f_r, flags, wi, wo, points, probe)
+            return Reconstruction(f_r, flags, wi, wo, points, probe, f_clip)
         sigma = cfg.fit.smooth_standard_px
         box = _bbox(on_std, int(math.ceil(4 * sigma)) + 2) or (slice(0, min(2, h)), slice(0, min(2, w)))
         lit_std, clip_std = cap.lit[box], cap.lit_clipped[box]
@@ -452,6 +480,7 @@ def reconstruct_capture(cap, *, band_rows: int = 512, dtype=np.float32) -> Recon
         offset = jnp.asarray([box[1].start, box[0].start], dtype)
         rho = jnp.asarray(np.broadcast_to(cap.rho_standard, (3,)), dtype)
         nf = jnp.asarray(cfg.fit.noise_floor, dtype)
+        sat = jnp.asarray(cap.saturation, dtype)
         rows_p, cols = pbox
         hb = max(1, min(hb, rows_p.stop - rows_p.start))
         zeros = np.zeros((hb, cols.stop - cols.start, 3), np.float32)
@@ -461,10 +490,93 @@ def reconstruct_capture(cap, *, band_rows: int = 512, dtype=np.float32) -> Recon
             n, sl = r1 - r0, (slice(r0, r1), cols)
             dark = zeros if cap.dark is None else pad(cap.dark[sl])
             out = _reconstruct_band(k, jnp.arange(r0, r0 + hb, dtype=dtype), jnp.asarray(cols.start, dtype),
-                                    pad(cap.lit[sl]), dark, pad(cap.lit_clipped[sl]), std, offset, rho, nf, **kw)
-            for dst, src in zip((f_r, flags, wi, wo, points), out):
-                dst[sl] = np.asarray(src)[:n]
-    return Reconstruction(f_r, flags, wi, wo, points, probe)
+                                    pad(cap.lit[sl]), dark, pad(cap.lit_clipped[sl]), std, offset, rho, nf, sat, **kw)
+            for dst, src in zip((f_r, flags, wi, wo, points, f_clip), out):
+                if dst is not None:
+                    dst[sl] = np.asarray(src)[:n]
+    return Reconstruction(f_r, flags, wi, wo, points, probe, f_clip)
+
+
+class ScanlineBins(NamedTuple):
+    """What :func:`_bin_scanlines` returns: the probe binned ``b × b``, image columns as scanlines.
+
+    Attributes
+    ----------
+    f_r
+        ``(S, N, 3)`` float64 bin means of ``f_r``; NaN where fewer than half
+        of the bin's pixels carry a value. Where :attr:`censored`, a lower
+        bound (see :func:`_bin_scanlines`).
+    censored
+        ``(S, N, 3)`` bool: the bin holds a clipped pixel; its value bounds the true mean from below.
+    wi, wo
+        ``(S, N, 3)`` unit bin-mean directions (material frame); ``(0, 0, 1)`` off the probe.
+    points
+        ``(S, N, 3)`` bin-mean sample-plane positions (mm) of the probe pixels.
+    b
+        The bin size (pixels).
+    box
+        Row and column slices of the probe's bounding box in the image.
+    """
+
+    f_r: np.ndarray
+    censored: np.ndarray
+    wi: np.ndarray
+    wo: np.ndarray
+    points: np.ndarray
+    b: int
+    box: tuple[slice, slice]
+
+
+def _bin_scanlines(rec: Reconstruction, max_samples: int) -> ScanlineBins:
+    r"""Bin a reconstruction's probe ``b × b`` (at most ``max_samples`` bins), image columns as scanlines.
+
+    ``b = ⌈√(n_probe / max_samples)⌉``; the probe's bounding box is padded to
+    a multiple of ``b``. Per bin and channel, with ``E`` its exact values
+    (finite ``f_r``) and ``C`` its clip bounds (finite ``f_clip``, when the
+    reconstruction has them):
+
+    * no clipped pixel: the mean of ``E`` if ``|E| ≥ b²/2``, else NaN;
+    * a clipped pixel (``|C| ≥ 1``, ``|E| + |C| ≥ b²/2``): *censored*, the
+      value ``(Σ_E f + Σ_C f_clip)/(|E| + |C|)``. Each ``f_clip`` bounds its
+      pixel's true value from below, so this bounds the bin's true mean from
+      below: a bin of mixed clipped and unclipped pixels is censored, never
+      the mean of its unclipped pixels alone (that would drop the brightest).
+
+    Directions and positions are the means over the bin's probe pixels, the
+    directions renormalised.
+    """
+    probe = rec.probe
+    n_probe = int(probe.sum())
+    rows = np.flatnonzero(probe.any(axis=1))
+    colz = np.flatnonzero(probe.any(axis=0))
+    box = (slice(rows[0], rows[-1] + 1), slice(colz[0], colz[-1] + 1))
+    b = max(1, math.ceil(math.sqrt(n_probe / max_samples)))
+    half = max(1.0, b * b / 2)
+
+    def total(a, fill):  # block sums over the b × b bins of the (cropped) bounding box, float64
+        return _block_sum(_pad_to(a, b, fill).astype(np.float64), b)
+
+    fc = rec.f_r[box]
+    fin = np.isfinite(fc)
+    n_f = total(fin, False)
+    s_f = total(np.where(fin, fc, 0.0), 0.0)
+    f_bin = np.where(n_f >= half, s_f / np.maximum(n_f, 1), np.nan)
+    cens = np.zeros(f_bin.shape, bool)
+    if rec.f_clip is not None:
+        cc = rec.f_clip[box]
+        cin = np.isfinite(cc)
+        n_c = total(cin, False)
+        cens = (n_c > 0) & (n_f + n_c >= half)
+        f_bin = np.where(cens, (s_f + total(np.where(cin, cc, 0.0), 0.0)) / np.maximum(n_f + n_c, 1), f_bin)
+    n_p = np.maximum(total(probe[box], False), 1)[..., None]
+    wi_bin, wo_bin = total(rec.wi[box], 0.0) / n_p, total(rec.wo[box], 0.0) / n_p
+    for d in (wi_bin, wo_bin):
+        nrm = np.linalg.norm(d, axis=-1, keepdims=True)
+        d /= np.where(nrm > 0, nrm, 1.0)
+        d[nrm[..., 0] == 0] = (0.0, 0.0, 1.0)
+    p_bin = total(np.nan_to_num(rec.points[box]), 0.0) / n_p
+    scan = lambda a: np.ascontiguousarray(a.transpose(1, 0, 2))  # noqa: E731
+    return ScanlineBins(scan(f_bin), scan(cens), scan(wi_bin), scan(wo_bin), scan(p_bin), b, box)
 
 
 def fit_capture(cap: Capture, *, max_fit_samples: int = 50_000, band_rows: int = 512) -> CaptureFit:
@@ -505,7 +617,6 @@ def fit_capture(cap: Capture, *, max_fit_samples: int = 50_000, band_rows: int =
 
     rec = reconstruct_capture(cap, band_rows=band_rows)
     f_r, wi, wo, flags, probe = rec.f_r, rec.wi, rec.wo, rec.flags, rec.probe
-    xs, ys = rec.points[..., 0], rec.points[..., 1]
 
     n_probe = int(probe.sum())
     if n_probe == 0:
@@ -526,36 +637,11 @@ def fit_capture(cap: Capture, *, max_fit_samples: int = 50_000, band_rows: int =
         raise CaptureError(lit_name, None, f"no usable probe pixel: {why}")
 
     # ---------------------------------------------------------------- fit data
-    rows = np.flatnonzero(probe.any(axis=1))
-    colz = np.flatnonzero(probe.any(axis=0))
-    r0, r1, c0, c1 = rows[0], rows[-1] + 1, colz[0], colz[-1] + 1
-    b = max(1, math.ceil(math.sqrt(n_probe / max_fit_samples)))
-    fc = _pad_to(f_r[r0:r1, c0:c1], b, np.nan)
-    wic = _pad_to(wi[r0:r1, c0:c1], b, 0.0)
-    woc = _pad_to(wo[r0:r1, c0:c1], b, 0.0)
-    pc = _pad_to(probe[r0:r1, c0:c1], b, False)
-    xc = _pad_to(np.nan_to_num(xs[r0:r1, c0:c1]), b, 0.0)
-    yc = _pad_to(np.nan_to_num(ys[r0:r1, c0:c1]), b, 0.0)
-    fin = np.isfinite(fc)
-    n_f = _block_sum(fin.astype(np.float64), b)
-    f_bin = _block_sum(np.where(fin, fc, 0.0).astype(np.float64), b)
-    enough = n_f >= max(1.0, b * b / 2)
-    f_bin = np.where(enough, f_bin / np.maximum(n_f, 1), np.nan)
-    n_p = _block_sum(pc.astype(np.float64), b)[..., None]
-    wi_bin = _block_sum(wic.astype(np.float64), b) / np.maximum(n_p, 1)
-    wo_bin = _block_sum(woc.astype(np.float64), b) / np.maximum(n_p, 1)
-    x_bin = _block_sum(xc.astype(np.float64), b) / np.maximum(n_p[..., 0], 1)
-    y_bin = _block_sum(yc.astype(np.float64), b) / np.maximum(n_p[..., 0], 1)
-    for d in (wi_bin, wo_bin):
-        nrm = np.linalg.norm(d, axis=-1, keepdims=True)
-        d /= np.where(nrm > 0, nrm, 1.0)
-        d[nrm[..., 0] == 0] = (0.0, 0.0, 1.0)
-    # scanlines = image columns: (S, N, 3)
-    F = np.ascontiguousarray(f_bin.transpose(1, 0, 2))
-    WI = np.ascontiguousarray(wi_bin.transpose(1, 0, 2))
-    WO = np.ascontiguousarray(wo_bin.transpose(1, 0, 2))
-    X = x_bin.T
-    Y = y_bin.T
+    bins = _bin_scanlines(rec, max_fit_samples)
+    b, (rows_p, cols_p) = bins.b, bins.box
+    r0, r1, c0, c1 = rows_p.start, rows_p.stop, cols_p.start, cols_p.stop
+    F, WI, WO = bins.f_r, bins.wi, bins.wo  # (S, N, 3), scanlines = image columns
+    X, Y = bins.points[..., 0], bins.points[..., 1]
     n_per = np.sum(np.all(np.isfinite(F), axis=-1), axis=1)
     keep = n_per >= MIN_SCANLINE_SAMPLES
     if not keep.any():

@@ -2,10 +2,10 @@
 
 The reconstruction is the capture pipeline's (:func:`wardjax.reconstruct_brdf`
 against the mirror point on the standard, the standard smoothed as
-:func:`wardjax.fit_capture` does, saturated and off-standard pixels masked);
-the image columns through the probe are the scanlines, binned ``b × b`` so
-that at most ``max_samples`` pixels per channel enter (as ``fit_capture``
-bins for its fit).
+:func:`wardjax.fit_capture` does, off-standard pixels masked, probe pixels
+the sensor clipped kept as censored lower bounds); the image columns
+through the probe are the scanlines, binned ``b × b`` so that at most
+``max_samples`` pixels per channel enter (the binning ``fit_capture`` uses).
 
 Noise
     A capture carries no per-pixel σ. It is estimated from the data with the
@@ -29,8 +29,6 @@ Noise
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
 from ..capture import CAPTURE_FILE, Capture, CaptureError
@@ -39,7 +37,7 @@ from ._models import ScanlineData, scanline_data
 __all__ = ["capture_data"]
 
 
-def _noise_model(f: np.ndarray) -> np.ndarray:
+def _noise_model(f: np.ndarray, exact: np.ndarray | None = None) -> np.ndarray:
     """σ per value from second-difference pseudo-residuals along axis 1 (see the module docstring).
 
     Parameters
@@ -47,6 +45,10 @@ def _noise_model(f: np.ndarray) -> np.ndarray:
     f
         ``(S, N, C)`` values along ``S`` scanlines, NaN where missing; a
         triple with a missing value is skipped.
+    exact
+        Optional ``(S, N, C)`` bool: only triples of these values enter the
+        fit (censored values are bounds, not noisy measurements); σ is still
+        given at every value.
 
     Returns
     -------
@@ -57,8 +59,9 @@ def _noise_model(f: np.ndarray) -> np.ndarray:
     """
     from scipy.optimize import nnls
 
-    e2 = (f[:, :-2] - 2.0 * f[:, 1:-1] + f[:, 2:]) ** 2 / 6.0
-    lvl = (f[:, :-2] + f[:, 1:-1] + f[:, 2:]) / 3.0
+    g = f if exact is None else np.where(exact, f, np.nan)
+    e2 = (g[:, :-2] - 2.0 * g[:, 1:-1] + g[:, 2:]) ** 2 / 6.0
+    lvl = (g[:, :-2] + g[:, 1:-1] + g[:, 2:]) / 3.0
     sig = np.empty_like(f)
     for c in range(f.shape[-1]):
         ok = np.isfinite(e2[..., c]) & np.isfinite(lvl[..., c])
@@ -77,6 +80,16 @@ def _noise_model(f: np.ndarray) -> np.ndarray:
 def capture_data(cap: Capture, *, max_samples: int = 20_000, band_rows: int = 512) -> ScanlineData:
     """Reconstructed BRDF scanlines of a loaded capture, with positions, lamp and estimated noise.
 
+    Probe pixels the sensor clipped enter as *censored* observations
+    (``ScanlineData.censored``): their clip level as a BRDF value
+    (:attr:`wardjax.pipeline.Reconstruction.f_clip`) is a lower bound on the
+    true value, which the saturation effect fits with the censored
+    likelihood. A bin holding any clipped pixel is censored, its value the
+    mean of its values and bounds, a lower bound on its true mean
+    (:func:`wardjax.pipeline._bin_scanlines`). A scanline is kept if it has
+    ``MIN_SCANLINE_SAMPLES`` uncensored values (ρd is profiled from those);
+    the noise model is fitted to uncensored triples only.
+
     Parameters
     ----------
     cap
@@ -86,46 +99,22 @@ def capture_data(cap: Capture, *, max_samples: int = 20_000, band_rows: int = 51
     band_rows
         Rows processed at a time.
     """
-    from ..pipeline import MIN_SCANLINE_SAMPLES, reconstruct_capture
+    from ..pipeline import MIN_SCANLINE_SAMPLES, _bin_scanlines, reconstruct_capture
 
     if cap.method != "scanline":
         raise CaptureError(CAPTURE_FILE, "method", f"diagnose needs method = 'scanline', got {cap.method!r}")
     cfg, rig = cap.config, cap.rig
-    rec = reconstruct_capture(cap, band_rows=band_rows, dtype=np.float64)
-    f_r, wi, wo, probe = rec.f_r, rec.wi, rec.wo, rec.probe
-    pts = np.nan_to_num(rec.points)
-    n_probe = int(probe.sum())
-    if n_probe == 0:
+    rec = reconstruct_capture(cap, band_rows=band_rows, dtype=np.float64, clip_bounds=True)
+    if not rec.probe.any():
         raise CaptureError(CAPTURE_FILE, "camera", "no pixel of the image sees the probe")
-    rows = np.flatnonzero(probe.any(axis=1))
-    colz = np.flatnonzero(probe.any(axis=0))
-    sl = (slice(rows[0], rows[-1] + 1), slice(colz[0], colz[-1] + 1))
-    b = max(1, math.ceil(math.sqrt(n_probe / max_samples)))
-
-    def binned(a, fill):
-        a = a[sl]
-        hh, ww = a.shape[:2]
-        a = np.pad(a, [(0, (-hh) % b), (0, (-ww) % b)] + [(0, 0)] * (a.ndim - 2), constant_values=fill)
-        hh, ww = a.shape[:2]
-        return a.reshape(hh // b, b, ww // b, b, *a.shape[2:])
-
-    fb = binned(f_r, np.nan)
-    fin = np.isfinite(fb)
-    n_f = fin.sum(axis=(1, 3))
-    f_bin = np.where(n_f >= max(1, b * b / 2), np.where(fin, fb, 0).sum(axis=(1, 3)) / np.maximum(n_f, 1), np.nan)
-    pb = binned(probe, False)
-    n_p = np.maximum(pb.sum(axis=(1, 3)), 1)[..., None]
-    geo = {k: binned(a, 0.0).sum(axis=(1, 3)) / n_p for k, a in (("wi", wi), ("wo", wo), ("pts", pts))}
-    for k in ("wi", "wo"):
-        nrm = np.linalg.norm(geo[k], axis=-1, keepdims=True)
-        geo[k] = np.where(nrm > 0, geo[k] / np.where(nrm > 0, nrm, 1), np.array([0.0, 0.0, 1.0]))
-    # scanlines = image columns
-    F = f_bin.transpose(1, 0, 2)
-    WI, WO, P = (geo[k].transpose(1, 0, 2) for k in ("wi", "wo", "pts"))
-    keep = np.sum(np.all(np.isfinite(F), axis=-1), axis=1) >= MIN_SCANLINE_SAMPLES
+    bins = _bin_scanlines(rec, max_samples)  # scanlines = image columns
+    F, cens = bins.f_r, bins.censored
+    exact = np.where(cens, np.nan, F)
+    keep = np.sum(np.all(np.isfinite(exact), axis=-1), axis=1) >= MIN_SCANLINE_SAMPLES
     if not keep.any():
         raise CaptureError(cfg.images.lit, None, f"no image column holds {MIN_SCANLINE_SAMPLES} usable probe values")
-    F, WI, WO, P = F[keep], WI[keep], WO[keep], P[keep]
-    sigma = _noise_model(F)
-    return scanline_data(F, WI, WO, sigma, points=P, lamp=np.asarray(rig.lamp, float), kind="ratio",
-                         rho_standard=float(np.mean(cap.rho_standard)))
+    F, cens, exact = F[keep], cens[keep], exact[keep]
+    sigma = _noise_model(F, exact=~cens)
+    return scanline_data(F, bins.wi[keep], bins.wo[keep], sigma, points=bins.points[keep],
+                         lamp=np.asarray(rig.lamp, float), kind="ratio", rho_standard=float(np.mean(cap.rho_standard)),
+                         censored=cens)
