@@ -39,6 +39,8 @@ __all__ = [
     "periodic_spectrum",
     "pyramid_build",
     "pyramid_build_spectrum",
+    "pyramid_collapse",
+    "pyramid_subbands",
     "pyramid_masks",
     "pyramid_reconstruct",
     "pyramid_shapes",
@@ -158,20 +160,30 @@ def pyramid_build(
 
 def pyramid_build_spectrum(spec, masks: dict, shapes: tuple[tuple[int, int], ...]):
     """:func:`pyramid_build` from ``X = rfft2(x, norm="forward")`` (``(C, H, W//2+1)``) instead of ``x``."""
-    big = shapes[0]
-    highpass = jnp.fft.irfft2(spec * masks["hi0"][None], s=big, norm="forward")
+    flat = pyramid_subbands(spec, masks, shapes)
+    bands = tuple(jnp.stack(flat[1 + 4 * lv : 5 + 4 * lv], axis=1) for lv in range(len(shapes) - 1))
+    return flat[0], bands, flat[-1]
+
+
+def pyramid_subbands(spec, masks: dict, shapes: tuple[tuple[int, int], ...]) -> tuple[Float[Array, "c hl wl"], ...]:
+    """The subbands of :func:`pyramid_build_spectrum` as one flat tuple, each its own array.
+
+    Order: highpass, then level by level the 4 orientations, then lowpass
+    (``2 + 4 height`` arrays ``(C, H_l, W_l)``). Separate arrays spare the
+    copies that stacking the orientations (and slicing them apart again for
+    :func:`pyramid_collapse`) would cost.
+    """
+    highpass = jnp.fft.irfft2(spec * masks["hi0"][None], s=shapes[0], norm="forward")
     z = spec * masks["lo0"][None]
-    bands = []
+    out = [highpass]
     for level, band in enumerate(masks["band"]):
         iz = 1j * z
         # One orientation at a time: the same transforms as one batched call, but XLA
         # keeps one band's spectrum live instead of four (a third less temporary memory).
-        bands.append(
-            jnp.stack([jnp.fft.irfft2(iz * m[None], s=shapes[level], norm="forward") for m in band], axis=1)
-        )
+        out.extend(jnp.fft.irfft2(iz * m[None], s=shapes[level], norm="forward") for m in band)
         z = _crop(z, shapes[level + 1]) * masks["lo"][level][None]
-    lowpass = jnp.fft.irfft2(z, s=shapes[-1], norm="forward")
-    return highpass, tuple(bands), lowpass
+    out.append(jnp.fft.irfft2(z, s=shapes[-1], norm="forward"))
+    return tuple(out)
 
 
 @functools.partial(jax.jit, static_argnames="shapes")
@@ -187,13 +199,21 @@ def pyramid_reconstruct(
     ``Z_l = pad(Z_{l+1} lo_l) + Σ_b DFT_l(band_lb) (−i A_b hi_l)``;
     ``X = Z_0 lo0 + DFT(highpass) hi0``.
     """
-    z = jnp.fft.rfft2(lowpass, norm="forward")
-    for level in range(len(bands) - 1, -1, -1):
+    flat = (highpass, *(band[:, b] for band in bands for b in range(band.shape[1])), lowpass)
+    return pyramid_collapse(flat, masks, shapes)
+
+
+def pyramid_collapse(subbands, masks: dict, shapes: tuple[tuple[int, int], ...]) -> Float[Array, "c h w"]:
+    """:func:`pyramid_reconstruct` from the flat tuple of :func:`pyramid_subbands`."""
+    height = len(shapes) - 1
+    z = jnp.fft.rfft2(subbands[-1], norm="forward")
+    for level in range(height - 1, -1, -1):
         band_spec = sum(
-            jnp.fft.rfft2(bands[level][:, b], norm="forward") * m[None] for b, m in enumerate(masks["band"][level])
+            jnp.fft.rfft2(subbands[1 + 4 * level + b], norm="forward") * m[None]
+            for b, m in enumerate(masks["band"][level])
         )
         z = _pad(z * masks["lo"][level][None], shapes[level]) + (-1j) * band_spec
-    spec = z * masks["lo0"][None] + jnp.fft.rfft2(highpass, norm="forward") * masks["hi0"][None]
+    spec = z * masks["lo0"][None] + jnp.fft.rfft2(subbands[0], norm="forward") * masks["hi0"][None]
     return jnp.fft.irfft2(spec, s=shapes[0], norm="forward")
 
 

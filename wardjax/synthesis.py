@@ -53,7 +53,8 @@ from ._pyramid import (
     periodic_smooth,
     periodic_spectrum,
     pyramid_build,
-    pyramid_build_spectrum,
+    pyramid_collapse,
+    pyramid_subbands,
     pyramid_masks,
     pyramid_reconstruct,
     pyramid_shapes,
@@ -865,9 +866,14 @@ def _pca(mean: np.ndarray, cov: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return mean, evecs * np.where(sign == 0, 1.0, sign)
 
 
-def _groups(hp, bands, lp, c: int) -> tuple:
-    """Subbands as sorting groups ``(C, g, n)``: highpass, each level's 4 orientations, lowpass."""
-    return (hp.reshape(c, 1, -1), *(b.reshape(c, ORIENTATIONS, -1) for b in bands), lp.reshape(c, 1, -1))
+def _subband_shapes(shapes) -> tuple[tuple[int, int], ...]:
+    """Grid of every subband in :func:`~wardjax._pyramid.pyramid_subbands` order."""
+    return (shapes[0], *(s for s in shapes[:-1] for _ in range(ORIENTATIONS)), shapes[-1])
+
+
+def _groups(subbands, c: int) -> tuple:
+    """Subbands as sorting rows ``(C, 1, n)``, one array per subband (highpass, levels × orientations, lowpass)."""
+    return tuple(b.reshape(c, 1, -1) for b in subbands)
 
 
 @functools.partial(jax.jit, static_argnames="shapes")
@@ -875,7 +881,7 @@ def _analysis_groups(x, mean, axis, masks, shapes):
     """One decorrelated channel ``d = (x − μ) · axis`` (float32) → periodic component → pyramid → subband groups,
     then the pixels ``(1, 1, H W)``."""
     d = ((x - mean[None, None]) @ axis).astype(jnp.float32)[None]
-    return _groups(*pyramid_build_spectrum(periodic_spectrum(d), masks, shapes), 1) + (d.reshape(1, 1, -1),)
+    return _groups(pyramid_subbands(periodic_spectrum(d), masks, shapes), 1) + (d.reshape(1, 1, -1),)
 
 
 def _quantile_picks(n: int, probs: np.ndarray) -> tuple[tuple[int, ...], np.ndarray]:
@@ -1022,17 +1028,15 @@ class SynthesisResult(eqx.Module):
 def _build_groups(d, masks, shapes):
     """Pyramid of the pixels ``d`` (``(C, 1, H W)``) as sorting groups (:func:`_groups`)."""
     c = d.shape[0]
-    return _groups(*pyramid_build(d.reshape(c, *shapes[0]), masks, shapes), c)
+    return _groups(pyramid_subbands(jnp.fft.rfft2(d.reshape(c, *shapes[0]), norm="forward"), masks, shapes), c)
 
 
 @functools.partial(jax.jit, static_argnames="shapes")
 def _collapse(groups, masks, shapes):
     """Inverse of :func:`_build_groups`: collapse matched subband groups into pixels ``(C, 1, H W)``."""
     c = groups[0].shape[0]
-    hp = groups[0].reshape(c, *shapes[0])
-    bands = tuple(g.reshape(c, ORIENTATIONS, *s) for g, s in zip(groups[1:-1], shapes[:-1]))
-    lp = groups[-1].reshape(c, *shapes[-1])
-    return pyramid_reconstruct(hp, bands, lp, masks, shapes).reshape(c, 1, -1)
+    subbands = tuple(g.reshape(c, *s) for g, s in zip(groups, _subband_shapes(shapes)))
+    return pyramid_collapse(subbands, masks, shapes).reshape(c, 1, -1)
 
 
 @functools.partial(jax.jit, static_argnames="sizes")
@@ -1042,14 +1046,12 @@ def _band_ks(picked, tables, probs, sizes):
 
 
 def _band_targets(band_q: np.ndarray, probs: np.ndarray, shapes):
-    """Sorted target values for every subband group at this output size, and the quantile tables by group."""
-    sizes = [shapes[0][0] * shapes[0][1]] + [s[0] * s[1] for s in shapes[:-1]] + [shapes[-1][0] * shapes[-1][1]]
-    starts = np.cumsum([0, 1] + [ORIENTATIONS] * (len(shapes) - 1) + [1])
+    """Sorted target values ``(C, 1, n_b)`` for every subband at this output size, and its quantile table ``(C, 1, Q)``."""
     groups, tables = [], []
-    for g, n in enumerate(sizes):
-        t = band_q[:, starts[g] : starts[g + 1]]
+    for b, (h, w) in enumerate(_subband_shapes(shapes)):
+        t = band_q[:, b : b + 1]
         tables.append(jnp.asarray(t, jnp.float32))
-        groups.append(_targets(t, probs, n))
+        groups.append(_targets(t, probs, h * w))
     return tuple(groups), tuple(tables)
 
 
