@@ -260,3 +260,49 @@ def test_binning_censors_a_bin_holding_a_clipped_pixel():
     np.testing.assert_array_equal(plain.f_r[:, 0, 0], [2.0, 3.0, nan, nan])
     assert not plain.censored.any()
     np.testing.assert_allclose(got.wi, np.broadcast_to([0.0, 0.6, 0.8], (4, 1, 3)))
+
+
+def test_captures_of_one_rig_share_one_compiled_reconstruction(tmp_path, monkeypatch):
+    # reconstruct_capture pads the probe's band and the standard's crop to bucketed sizes (pipeline._bucket), so
+    # two captures whose probe and standard sit a little differently compile _reconstruct_band once, not once
+    # each (seconds per compile on a real image), and reconstruct what the unpadded kernel does.
+    import dataclasses
+
+    from wardjax import pipeline
+    from wardjax.capture_sim import default_rig
+
+    p = CASES["iso_marble_srgb8"][0]
+    base = default_rig((96, 72))
+    moved = dataclasses.replace(base, probe=(6.0, 120.0, -148.0, 150.0), standard=(-119.0, -3.0, -150.0, 149.0))
+    caps = [wj.simulate_capture(p, tmp_path / f"c{i}", seed=i, rig=r, texture="marble", headroom=2.0)
+            for i, r in enumerate((base, moved))]
+    bucket = pipeline._bucket
+
+    def reconstruct(bucket_fn):
+        monkeypatch.setattr(pipeline, "_bucket", bucket_fn)
+        pipeline._reconstruct_band.clear_cache()
+        recs = [pipeline.reconstruct_capture(c, clip_bounds=True) for c in caps]
+        return recs, pipeline._reconstruct_band._cache_size()
+
+    exact, n_exact = reconstruct(lambda n: n)
+    padded, n_padded = reconstruct(bucket)
+    assert n_exact == 2 and n_padded == 1
+    assert not np.array_equal(exact[0].probe, exact[1].probe)
+    eps = np.finfo(np.float32).eps
+    for a, b in zip(exact, padded):
+        for name in ("flags", "wi", "wo", "points", "probe"):
+            np.testing.assert_array_equal(getattr(b, name), getattr(a, name), err_msg=name)
+        for name in ("f_r", "f_clip"):  # the same operations; XLA may round a division differently by shape
+            np.testing.assert_allclose(getattr(b, name), getattr(a, name), rtol=4 * eps, err_msg=name)
+        assert np.isfinite(a.f_r).sum() > 1000 and np.isfinite(a.f_clip).sum() > 10
+
+
+def test_bucket_sizes():
+    from wardjax.pipeline import _bucket
+
+    assert [_bucket(n) for n in (1, 8, 9, 33, 59, 64, 65, 300, 512, 513, 3000)] == \
+        [8, 8, 16, 40, 64, 64, 80, 320, 512, 640, 3072]
+    n = np.arange(1, 5000)
+    m = np.array([_bucket(int(k)) for k in n])
+    assert np.all(m >= n) and np.all(m <= np.maximum(1.25 * n, n + 7))
+    assert len(np.unique(m[(n > 1024) & (n <= 4096)])) == 8  # four sizes an octave

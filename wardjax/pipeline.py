@@ -351,17 +351,21 @@ class Reconstruction(NamedTuple):
         return None if self.f_clip is None else np.isfinite(self.f_clip)
 
 
-def _sample_bilinear_jnp(image, uv):
+def _sample_bilinear_jnp(image, uv, size):
     """:func:`~wardjax.reconstruct.sample_bilinear` in ``jnp``: values and "a neighbour is clipped".
 
-    ``image`` is ``(h, w, C + 3)``: ``C`` values, then the 3 clipped flags as 0/1.
+    ``image`` is ``(h', w', C + 3)``: ``C`` values, then the 3 clipped flags
+    as 0/1. Only its first ``size = (w, h)`` (int32, traced) columns and rows
+    are the image; the rest is padding (see :func:`_bucket`), never read.
     """
-    h, w, c3 = image.shape
+    c3 = image.shape[-1]
+    w, h = size[0], size[1]
     u, v = uv[..., 0], uv[..., 1]
-    ok = jnp.isfinite(u) & jnp.isfinite(v) & (u >= 0) & (u <= w - 1) & (v >= 0) & (v <= h - 1)
+    wm1, hm1 = (w - 1).astype(u.dtype), (h - 1).astype(v.dtype)
+    ok = jnp.isfinite(u) & jnp.isfinite(v) & (u >= 0) & (u <= wm1) & (v >= 0) & (v <= hm1)
     us, vs = jnp.where(ok, u, 0.0), jnp.where(ok, v, 0.0)
-    u0 = jnp.minimum(jnp.floor(us).astype(jnp.int32), max(w - 2, 0))
-    v0 = jnp.minimum(jnp.floor(vs).astype(jnp.int32), max(h - 2, 0))
+    u0 = jnp.minimum(jnp.floor(us).astype(jnp.int32), jnp.maximum(w - 2, 0))
+    v0 = jnp.minimum(jnp.floor(vs).astype(jnp.int32), jnp.maximum(h - 2, 0))
     u1, v1 = jnp.minimum(u0 + 1, w - 1), jnp.minimum(v0 + 1, h - 1)
     fu, fv = (us - u0)[..., None], (vs - v0)[..., None]
     i00, i01, i10, i11 = image[v0, u0], image[v0, u1], image[v1, u0], image[v1, u1]
@@ -378,17 +382,40 @@ def _masks_kernel(k, rows, *, width: int, height: int):
     return g[3], g[4]
 
 
+def _bucket(n: int) -> int:
+    """The size a compiled kernel is padded to: the smallest ``m ≥ n`` on the ladder ``2^j · {5, 6, 7, 8}/4``.
+
+    For ``2^j < n ≤ 2^(j+1)``, ``m`` is ``n`` rounded up to a multiple of
+    ``max(2^(j−2), 8)``: at most 25 % (or 7) over, so captures whose probe and
+    standard sit in slightly different places share one compiled program
+    instead of compiling (seconds) once per capture.
+    """
+    n = max(int(n), 1)
+    q = max(1 << max((n - 1).bit_length() - 3, 0), 8)
+    return -(-n // q) * q
+
+
+def _pad_to_shape(a: np.ndarray, shape: tuple[int, ...]) -> np.ndarray:
+    """``a`` zero-padded at the end of its leading axes to ``shape``."""
+    if a.shape[: len(shape)] == shape:
+        return a
+    return np.pad(a, [(0, t - n) for t, n in zip(shape, a.shape)] + [(0, 0)] * (a.ndim - len(shape)))
+
+
 @functools.partial(jax.jit, static_argnames=("width", "height", "ncols"))
-def _reconstruct_band(k, rows, col0, lit, dark, clipped, std, offset, rho, noise_floor, saturation, *, width: int,
-                      height: int, ncols: int):
+def _reconstruct_band(k, rows, col0, lit, dark, clipped, std, std_size, offset, rho, noise_floor, saturation, *,
+                      width: int, height: int, ncols: int):
     """Geometry, mirror sampling and eq. "f_r,measured" of a band of rows, fused (dtype of ``k``).
 
     The same computation as :func:`~wardjax.geometry.pixel_geometry`,
     :func:`~wardjax.reconstruct.sample_bilinear` and
     :func:`~wardjax.reconstruct.reconstruct_brdf` (the NumPy references,
     tested equal). ``std`` is the cropped standard ``(h', w', 9)``: lit,
-    dark, clipped; ``offset`` its ``(u, v)`` origin in the image. Only
-    columns ``col0 … col0 + ncols − 1`` (those through the probe).
+    dark, clipped, of which the first ``std_size = (w, h)`` are real (the rest
+    padding); ``offset`` its ``(u, v)`` origin in the image. Columns ``col0 …
+    col0 + ncols − 1`` (those through the probe, and padding past them). The
+    band's and the crop's shapes are bucketed (:func:`_bucket`), so they
+    and ``ncols`` vary little between captures of one rig.
 
     Also the clip bound of each probe pixel whose *own* lit value is clipped
     and which nothing else masks (its mirror point unclipped, on the
@@ -401,7 +428,7 @@ def _reconstruct_band(k, rows, col0, lit, dark, clipped, std, offset, rho, noise
     bound (it underestimates the denominator).
     """
     pts, wi, wo, probe, _, muv, mok = band_geometry_jnp(k, rows, width=width, height=height, col0=col0, ncols=ncols)
-    sampled, clip_std = _sample_bilinear_jnp(std, muv - offset[None, None, :])
+    sampled, clip_std = _sample_bilinear_jnp(std, muv - offset[None, None, :], std_size)
     v_std, v_std_bg = sampled[..., :3], sampled[..., 3:]
     num = lit.astype(k.dtype) - dark.astype(k.dtype)
     den = v_std - v_std_bg
@@ -455,9 +482,6 @@ def reconstruct_capture(cap, *, band_rows: int = 512, dtype=np.float32, clip_bou
     on_std = np.empty((h, w), bool)
     dims = {"width": w, "height": h}
 
-    def pad(a):  # a band shorter than hb, padded: one compilation for the whole image
-        return a if a.shape[0] == hb else np.concatenate([a, np.zeros((hb - a.shape[0],) + a.shape[1:], a.dtype)])
-
     with jax.enable_x64(dtype == np.float64):
         k = jnp.asarray(rig_constants(rig, cap.tangent), dtype)
         for r0 in range(0, h, hb):
@@ -475,25 +499,29 @@ def reconstruct_capture(cap, *, band_rows: int = 512, dtype=np.float32, clip_bou
             std_mask = on_std[box] & ~clip_std.any(axis=-1)
             lit_std = _smooth_on(lit_std, std_mask, sigma)
             dark_std = dark_std if cap.dark is None else _smooth_on(dark_std, std_mask, sigma)
-        std = jnp.asarray(np.concatenate([lit_std, dark_std, clip_std.astype(np.float32)], -1), dtype)
+        std = np.concatenate([lit_std, dark_std, clip_std.astype(np.float32)], -1)
         del lit_std, dark_std, clip_std
+        std_size = jnp.asarray([std.shape[1], std.shape[0]], jnp.int32)
+        std = jnp.asarray(_pad_to_shape(std, (_bucket(std.shape[0]), _bucket(std.shape[1]))), dtype)
         offset = jnp.asarray([box[1].start, box[0].start], dtype)
         rho = jnp.asarray(np.broadcast_to(cap.rho_standard, (3,)), dtype)
         nf = jnp.asarray(cfg.fit.noise_floor, dtype)
         sat = jnp.asarray(cap.saturation, dtype)
         rows_p, cols = pbox
-        hb = max(1, min(hb, rows_p.stop - rows_p.start))
-        zeros = np.zeros((hb, cols.stop - cols.start, 3), np.float32)
-        kw = {**dims, "ncols": cols.stop - cols.start}
-        for r0 in range(rows_p.start, rows_p.stop, hb):
-            r1 = min(r0 + hb, rows_p.stop)
-            n, sl = r1 - r0, (slice(r0, r1), cols)
-            dark = zeros if cap.dark is None else pad(cap.dark[sl])
-            out = _reconstruct_band(k, jnp.arange(r0, r0 + hb, dtype=dtype), jnp.asarray(cols.start, dtype),
-                                    pad(cap.lit[sl]), dark, pad(cap.lit_clipped[sl]), std, offset, rho, nf, sat, **kw)
+        step = max(1, min(hb, rows_p.stop - rows_p.start))  # rows per band; the kernel sees them padded
+        band = (_bucket(step), _bucket(cols.stop - cols.start))
+        zeros = np.zeros(band + (3,), np.float32)
+        kw = {**dims, "ncols": band[1]}
+        for r0 in range(rows_p.start, rows_p.stop, step):
+            r1 = min(r0 + step, rows_p.stop)
+            n, m, sl = r1 - r0, cols.stop - cols.start, (slice(r0, r1), cols)
+            dark = zeros if cap.dark is None else _pad_to_shape(cap.dark[sl], band)
+            out = _reconstruct_band(k, jnp.arange(r0, r0 + band[0], dtype=dtype), jnp.asarray(cols.start, dtype),
+                                    _pad_to_shape(cap.lit[sl], band), dark, _pad_to_shape(cap.lit_clipped[sl], band),
+                                    std, std_size, offset, rho, nf, sat, **kw)
             for dst, src in zip((f_r, flags, wi, wo, points, f_clip), out):
                 if dst is not None:
-                    dst[sl] = np.asarray(src)[:n]
+                    dst[sl] = np.asarray(src)[:n, :m]
     return Reconstruction(f_r, flags, wi, wo, points, probe, f_clip)
 
 
