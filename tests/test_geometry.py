@@ -116,16 +116,26 @@ def test_camera_validation():
 
 @pytest.mark.parametrize("dtype, tol_mm, tol_px", [(np.float64, 1e-9, 1e-9), (np.float32, 2e-3, 2e-3)])
 def test_band_geometry_is_pixel_geometry(dtype, tol_mm, tol_px):
-    # The fused, compiled band kernel computes what pixel_geometry + to_material_frame do.
-    from wardjax.geometry import band_geometry
+    # The band geometry the pipeline's compiled kernels fuse (band_geometry_jnp) computes what
+    # pixel_geometry + to_material_frame do, for whole rows and for a window of columns.
+    import jax
+    import jax.numpy as jnp
+
+    from wardjax.geometry import band_geometry_jnp, rig_constants
 
     rig = Rig(lamp=(0.0, 300.0, 400.0), camera=OBLIQUE, probe=(3.0, 120.0, -150.0, 150.0),
               standard=(-120.0, -3.0, -150.0, 150.0))
     rows = np.arange(0, 301, 7)
     u, v = np.meshgrid(np.arange(401, dtype=float), rows.astype(float))
     ref = pixel_geometry(rig, u, v)
-    got = band_geometry(rig, rows, tangent=(0.6, 0.8), dtype=dtype)
-    assert got.points.dtype == dtype
+    kernel = jax.jit(band_geometry_jnp, static_argnames=("width", "height", "ncols"))
+    with jax.enable_x64(dtype == np.float64):
+        k = jnp.asarray(rig_constants(rig, (0.6, 0.8)), dtype)
+        r = jnp.asarray(rows, dtype)
+        got = jax.tree_util.tree_map(np.asarray, kernel(k, r, width=401, height=301))
+        window = jax.tree_util.tree_map(np.asarray, kernel(k, r, col0=jnp.asarray(150, dtype), width=401,
+                                                           height=301, ncols=100))
+    assert got.points.dtype == dtype and got.points.shape == (len(rows), 401, 3)
     hit = np.isfinite(ref.points[..., 0])
     np.testing.assert_array_equal(np.isfinite(got.points[..., 0]), hit)
     np.testing.assert_allclose(got.points[hit], ref.points[hit], atol=tol_mm)
@@ -137,3 +147,5 @@ def test_band_geometry_is_pixel_geometry(dtype, tol_mm, tol_px):
     ok = ref.mirror_ok
     assert ok.sum() > 1000
     np.testing.assert_allclose(got.mirror_pixels[ok], ref.mirror_pixels[ok], atol=tol_px)
+    for name in got._fields:  # columns 150 … 249: the same values
+        np.testing.assert_array_equal(getattr(window, name), getattr(got, name)[:, 150:250], err_msg=name)

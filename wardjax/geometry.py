@@ -29,7 +29,6 @@ from __future__ import annotations
 import dataclasses
 from typing import NamedTuple
 
-import jax
 import jax.numpy as jnp
 import numpy as np
 
@@ -39,7 +38,6 @@ __all__ = [
     "PixelGeometry",
     "Rig",
     "back_project",
-    "band_geometry",
     "in_box",
     "irradiance_factor",
     "mirror_point",
@@ -299,7 +297,7 @@ def pixel_geometry(rig: Rig, u, v) -> PixelGeometry:
 
 
 class BandGeometry(NamedTuple):
-    """:func:`band_geometry` of a band of whole image rows, ``(B, W, …)`` arrays.
+    """:func:`band_geometry_jnp` of a band of image rows, ``(B, W, …)`` arrays.
 
     Attributes
     ----------
@@ -341,8 +339,12 @@ def _jnp_in_box(x, y, box):
 def band_geometry_jnp(k, rows, *, width: int, height: int, col0=0, ncols: int | None = None):
     """:func:`pixel_geometry` + :func:`to_material_frame` of whole rows in ``jnp`` (traceable; dtype of ``k``).
 
-    ``k`` is :func:`rig_constants`; returns the fields of :class:`BandGeometry`
-    for image columns ``col0 … col0 + ncols − 1`` (default all ``width``) of ``rows``.
+    ``k`` is :func:`rig_constants`; returns the :class:`BandGeometry` of image
+    columns ``col0 … col0 + ncols − 1`` (default all ``width``) of ``rows``.
+    Same mathematics as :func:`pixel_geometry` (the float64 reference, tested
+    equal), with the directions in the material frame of the tangent in
+    ``k``; in float32 the points are good to ~10⁻⁴ mm and the mirror pixels
+    to ~10⁻⁴ px. The capture pipeline fuses it into its compiled kernels.
     """
     # Planar: every quantity is a (B, W) plane per component (vectorises; no size-3 axes until the end).
     ax = [[k[3 * i + j] for j in range(3)] for i in range(3)]  # rows right, down, forward
@@ -380,36 +382,5 @@ def band_geometry_jnp(k, rows, *, width: int, height: int, col0=0, ncols: int | 
     mv = cy + fy * cam_y / zs
     inside = (mu >= 0) & (mu <= width - 1) & (mv >= 0) & (mv <= height - 1)
     mirror_ok = hit & front & inside & _jnp_in_box(-x, y, std)
-    return pts, wi, wo, in_probe, in_std, jnp.stack([mu, mv], -1), mirror_ok
+    return BandGeometry(pts, wi, wo, in_probe, in_std, jnp.stack([mu, mv], -1), mirror_ok)
 
-
-_band_kernel = jax.jit(band_geometry_jnp, static_argnames=("width", "height"))
-
-
-def band_geometry(rig: Rig, rows, tangent=(1.0, 0.0), dtype=np.float32) -> BandGeometry:
-    """:func:`pixel_geometry` of whole image rows, fused and compiled, in ``dtype``.
-
-    Same mathematics as :func:`pixel_geometry` (which stays the float64
-    reference), with the directions already in the material frame of
-    ``tangent`` (:func:`to_material_frame`). In float32 the points are good
-    to ~10⁻⁴ mm and the mirror pixels to ~10⁻⁴ px, far below what the
-    reconstruction resolves; one band costs a few array passes instead of
-    dozens of NumPy temporaries. Bands of equal length share one compilation.
-
-    Parameters
-    ----------
-    rig
-        The :class:`Rig`.
-    rows
-        ``(B,)`` row indices (any values; e.g. padded past the image).
-    tangent
-        The material's tangent ``(tx, ty)`` in the sample plane.
-    dtype
-        ``float32`` (default) or ``float64`` (computed under a scoped ``jax.enable_x64``).
-    """
-    dtype = np.dtype(dtype)
-    cam = rig.camera
-    with jax.enable_x64(dtype == np.float64):
-        k = jnp.asarray(rig_constants(rig, tangent), dtype)
-        out = _band_kernel(k, jnp.asarray(np.asarray(rows), dtype), width=cam.width, height=cam.height)
-        return BandGeometry(*(np.asarray(a) for a in out))

@@ -379,7 +379,7 @@ def _sample_bilinear_jnp(image, uv, size):
 def _masks_kernel(k, rows, *, width: int, height: int):
     """The probe and standard masks of a band (the rest of the geometry is compiled away)."""
     g = band_geometry_jnp(k, rows, width=width, height=height)
-    return g[3], g[4]
+    return g.in_probe, g.in_standard
 
 
 def _bucket(n: int) -> int:
