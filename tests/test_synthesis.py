@@ -365,6 +365,12 @@ def test_05_synthesis_is_deterministic_and_clamps(tiny_model):
         wj.synthesize_texture(tiny_model, (24, 40), iterations=0)
 
 
+def test_05_progress_reports_every_iteration(tiny_model):
+    seen = []
+    res = wj.synthesize_texture(tiny_model, (24, 40), seed=7, iterations=3, progress=lambda k, n: seen.append((k, n)))
+    assert seen == [(1, 3), (2, 3), (3, 3)] and res.distance.shape == (3,)
+
+
 def test_05_no_global_jax_config_change(tiny_model):
     before = jax.config.jax_enable_x64
     wj.synthesize_texture(tiny_model, (24, 40), iterations=1)

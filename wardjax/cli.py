@@ -270,9 +270,15 @@ def texture_synthesize(model_path: Path, size: str, seed: int, iterations: int, 
     shape = _parse_size(size)
     if out_path.suffix.lower() not in (".tif", ".tiff", ".png"):
         _fail(f"{out_path}: unknown image type {out_path.suffix!r}, expected .tif, .tiff or .png")
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+
     try:
         model = TextureModel.load(model_path)
-        result = synthesize_texture(model, shape, seed=seed, iterations=iterations)
+        with Progress(TextColumn("synthesising"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
+                      console=Console(stderr=True), transient=True) as bar:
+            task = bar.add_task("", total=iterations)
+            result = synthesize_texture(model, shape, seed=seed, iterations=iterations,
+                                        progress=lambda k, n: bar.update(task, completed=k))
         write_texture_image(out_path, result.image)
     except ValueError as e:
         _fail(str(e).splitlines()[0])

@@ -39,7 +39,7 @@ import math
 import os
 import tempfile
 from pathlib import Path
-from typing import Literal
+from typing import Callable, Literal
 
 import equinox as eqx
 import jax
@@ -1055,7 +1055,7 @@ def _band_targets(band_q: np.ndarray, probs: np.ndarray, shapes):
     return tuple(groups), tuple(tables)
 
 
-def _heeger_bergen(rng, band_q, pixel_q, probs64, masks, shapes, iterations: int, sort: SortMethod):
+def _heeger_bergen(rng, band_q, pixel_q, probs64, masks, shapes, iterations: int, sort: SortMethod, progress=None):
     """The iterations of :func:`synthesize_texture`, channel by channel, from the noise of ``rng`` (a NumPy Generator).
 
     Per channel: ``d ← match(noise, pixels)``; then ``iterations`` times: pyramid
@@ -1067,8 +1067,10 @@ def _heeger_bergen(rng, band_q, pixel_q, probs64, masks, shapes, iterations: int
     The channels are independent, so they are interleaved: while the host ranks
     one channel's subbands, XLA builds or collapses another's pyramid
     (asynchronous dispatch); the subband targets are interpolated while XLA
-    builds the first pyramids. Returns the ``C`` channels ``(1, 1, H W)`` and
-    the KS distances ``(iterations + 1, C, B)``, the first for the starting noise.
+    builds the first pyramids. ``progress(k, iterations)`` is called as the
+    ``k``-th iteration's matching is done. Returns the ``C`` channels
+    ``(1, 1, H W)`` and the KS distances ``(iterations + 1, C, B)``, the first
+    for the starting noise.
     """
     c, n_pix = pixel_q.shape[0], shapes[0][0] * shapes[0][1]
     probs = jnp.asarray(probs64, jnp.float32)
@@ -1094,6 +1096,8 @@ def _heeger_bergen(rng, band_q, pixel_q, probs64, masks, shapes, iterations: int
         for ch in range(len(collapsed)):
             (ds[ch],), _ = _rank_match((collapsed[ch],), (pix_targets[ch],), ((),), sort)
             groups[ch] = _build_groups(ds[ch], masks, shapes)
+        if progress is not None and not last:
+            progress(it + 1, iterations)
     ks = np.stack([np.concatenate([np.asarray(k[it], np.float64) for k in ks]) for it in range(iterations + 1)])
     return ds, ks
 
@@ -1147,6 +1151,7 @@ def synthesize_texture(
     iterations: int = 5,
     rho_s=None,
     sort: Literal["auto", "numpy", "xla"] = "auto",
+    progress: Callable[[int, int], None] | None = None,
 ) -> SynthesisResult:
     """Synthesise a texture of any size from a :class:`TextureModel` (Heeger & Bergen 1995, paper section 4.2).
 
@@ -1181,6 +1186,9 @@ def synthesize_texture(
     sort
         ``"auto"`` (NumPy on CPU, XLA elsewhere), ``"numpy"`` or ``"xla"``; all
         give identical results.
+    progress
+        Called as ``progress(k, iterations)`` when iteration ``k`` is done (the
+        CLI draws its progress bar with it).
 
     Returns
     -------
@@ -1223,6 +1231,7 @@ def synthesize_texture(
             shapes,
             iterations,
             sort,
+            progress,
         )
         mu, cov = (np.asarray(a) for a in _channel_moments(ds))
         # x = V (μ + W (d − μ)) + m: decorrelate, back to RGB, clamp, in one pass over the pixels.
