@@ -365,16 +365,24 @@ def _rank_row(v, target, pick, out, picked, pos) -> None:
     out[bits] = target  # fancy assignment with intp indices: half the time of np.put here
 
 
+@functools.lru_cache(maxsize=32)
+def _positions(n: int) -> np.ndarray:
+    """``arange(n)`` as int64, read-only and cached: the position bits of the sort keys."""
+    pos = np.arange(n, dtype=np.int64)
+    pos.setflags(write=False)
+    return pos
+
+
 def _rank_host(values, targets, picks, workers: int | None = None):
     """:func:`_rank_match` in NumPy: rows spread over a thread pool, largest first."""
     values = [np.ascontiguousarray(v, np.float32) for v in values]
     targets = [None] * len(values) if targets is None else [np.ascontiguousarray(t, np.float32) for t in targets]
-    picks = [np.asarray(p, np.intp) for p in picks]
+    picks = [np.asarray(p, np.intp) for p in picks]  # no copy when given intp arrays (as synthesis does)
     matched = [None if t is None else _aligned_empty(v.shape, np.float32) for v, t in zip(values, targets)]
     picked = [np.empty((*v.shape[:-1], len(p)), np.float32) for v, p in zip(values, picks)]
     jobs = []  # one per row: (values, target, pick, out, picked, positions), all 1-d views
     for v, t, m, pk, p in zip(values, targets, matched, picked, picks):
-        pos = None if t is None else np.arange(v.shape[-1], dtype=np.int64)
+        pos = None if t is None else _positions(v.shape[-1])
         for j in np.ndindex(v.shape[:-1]):
             jobs.append((v[j], None if t is None else t[j], p, None if m is None else m[j], pk[j], pos))
     jobs.sort(key=lambda job: -job[0].size)
@@ -392,7 +400,7 @@ def _rank_host(values, targets, picks, workers: int | None = None):
 
 @functools.partial(jax.jit, static_argnames="picks")
 def _rank_xla(values, targets, picks):
-    """:func:`_rank_match` in XLA (``lax.sort`` of the same keys: the same permutation)."""
+    """:func:`_rank_match` in XLA (``lax.sort`` of integer keys in the host keys' order: the same permutation)."""
     picks = [np.asarray(p, np.int32) for p in picks]
     if targets is None:
         return None, tuple(jnp.sort(v, axis=-1)[..., p] for v, p in zip(values, picks))
@@ -408,7 +416,8 @@ def _rank_match(values, targets, picks, method: SortMethod = "auto"):
     """Exact rank matching of every row (last axis) of every array in ``values``.
 
     For each row ``x`` (length ``n``) with sorted order ``x_(0) ≤ … ≤ x_(n−1)``
-    (ties broken by position): ``matched[i] = target[rank(i)]``, where ``target``
+    (ties broken by position, increasing where the sign bit is clear and
+    decreasing where it is set; see the notes above): ``matched[i] = target[rank(i)]``, where ``target``
     is the row's nondecreasing target values, and ``picked = x_(pick)``, the
     order statistics at the given positions. ``targets=None`` computes only
     ``picked``.
@@ -420,7 +429,7 @@ def _rank_match(values, targets, picks, method: SortMethod = "auto"):
     targets
         Tuple of float32 arrays of the same shapes, or ``None``.
     picks
-        Tuple (one per array) of tuples of int positions in ``[0, n_g)``.
+        One sequence (or intp array) per array of int positions in ``[0, n_g)``.
     method
         ``"numpy"`` (host sort), ``"xla"`` or ``"auto"`` (NumPy on CPU).
 
@@ -429,7 +438,8 @@ def _rank_match(values, targets, picks, method: SortMethod = "auto"):
     matched, picked : tuples of jax.Array (``matched`` is ``None`` without targets)
     """
     if method == "xla" or (method == "auto" and jax.default_backend() != "cpu"):
-        return _rank_xla(tuple(values), None if targets is None else tuple(targets), tuple(picks))
+        static = tuple(tuple(int(i) for i in p) for p in picks)
+        return _rank_xla(tuple(values), None if targets is None else tuple(targets), static)
     return _rank_host(values, targets, picks)
 
 
@@ -486,8 +496,8 @@ def _ks_stride(n: int) -> int:
     return max(1, n // _KS_POINTS)
 
 
-def _ks_picks(n: int) -> tuple[int, ...]:
-    return tuple(range(0, n, _ks_stride(n)))
+def _ks_picks(n: int) -> np.ndarray:
+    return np.arange(0, n, _ks_stride(n), dtype=np.intp)
 
 
 def _ks_sorted(sub: Float[Array, "... m"], table: Float[Array, "... q"], probs, n_all: int) -> Float[Array, "..."]:
@@ -530,7 +540,7 @@ def match_histogram(values, quantiles, probabilities=None, *, axis: int = -1) ->
     ``Q((k + 1/2) / n)``, where ``Q`` interpolates the points
     ``(probabilities, quantiles)`` linearly. So the sorted
     output *equals* the target quantiles, and the output keeps the rank order of
-    the input (ties broken by position). This is Heeger & Bergen's (1995)
+    the input (ties broken by position, deterministically). This is Heeger & Bergen's (1995)
     histogram matching without the binning of their CDF tables.
 
     Parameters
@@ -884,7 +894,7 @@ def _analysis_groups(x, mean, axis, masks, shapes):
     return _groups(pyramid_subbands(periodic_spectrum(d), masks, shapes), 1) + (d.reshape(1, 1, -1),)
 
 
-def _quantile_picks(n: int, probs: np.ndarray) -> tuple[tuple[int, ...], np.ndarray]:
+def _quantile_picks(n: int, probs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Order statistics for quantiles at ``probs`` (linear interpolation at position ``p (n − 1)``).
 
     Returns the positions ``(i0…, i1…)`` to read from the sorted sample and the weights ``w``:
@@ -893,7 +903,7 @@ def _quantile_picks(n: int, probs: np.ndarray) -> tuple[tuple[int, ...], np.ndar
     pos = probs * (n - 1.0)
     i0 = np.clip(np.floor(pos).astype(np.int64), 0, n - 1)
     i1 = np.minimum(i0 + 1, n - 1)
-    return tuple(int(i) for i in np.concatenate([i0, i1])), pos - i0
+    return np.concatenate([i0, i1]).astype(np.intp), pos - i0
 
 
 def analyze_texture(
