@@ -375,3 +375,32 @@ def test_float32_cancellation_is_flagged_and_refit_in_float64():
     assert np.max(np.abs(res.params.alpha_x / z["alpha"] - 1)) < 0.1
     ref = wj.fit_scanlines(z["f_r"], z["wi"], z["wo"], weights=w)
     np.testing.assert_allclose(res.params.alpha_x, ref.params.alpha_x, rtol=1e-12)
+
+
+@pytest.mark.parametrize("n", [5, 59, 64, 127, 128, 200, 1000, 4097])
+def test_padded_samples_leave_the_prepared_scanline_unchanged(rng, n):
+    # fit_scanlines pads the sample axis to _shapes.bucket(N) at zero weight and passes N as data, so that
+    # captures of one rig share the compiled kernel; prepare must then gather the grid's subsample (every
+    # max(1, ⌊N/64⌋)-th sample) exactly as it slices it unpadded.
+    from wardjax import _shapes, _varpro
+
+    pad = _shapes.bucket(n) + 3
+    f, w = rng.uniform(0.1, 1.0, (3, pad)), rng.uniform(0.5, 2.0, (1, pad))
+    u, v, g = rng.uniform(0.0, 0.5, (3, pad))
+    w[:, n:] = 0.0
+    with jax.enable_x64(True):
+        plain = _varpro.prepare(f[:, :n], u[:n], v[:n], g[:n], w[:, :n])
+        padded = jax.jit(_varpro.prepare, static_argnums=5)(f, u, v, g, w, True, np.int32(n))
+    tol = 64 * np.finfo(float).eps
+    for name in ("wsum", "fbar", "k0", "n_obs", "n_samples", "theta_guess", "grid_wsum", "grid_fsum"):
+        # grid_fsum sums centred data (≈ 0): its rounding is relative to Σ w f
+        np.testing.assert_allclose(getattr(padded, name), getattr(plain, name), rtol=tol,
+                                   atol=tol * float(np.sum(w * f)), err_msg=name)
+    # The grid's streams: the same samples (gwf holds centred data: rounding), then zero-weight slots.
+    m = plain.grid_x.shape[-1]
+    for name in ("grid_gw", "grid_gwf", "grid_g2w", "grid_x"):
+        want = np.asarray(getattr(plain, name))
+        np.testing.assert_allclose(np.asarray(getattr(padded, name))[..., :m], want, rtol=tol,
+                                   atol=tol * np.max(np.abs(want)), err_msg=name)
+    for name in ("grid_gw", "grid_gwf", "grid_g2w"):
+        assert not np.any(np.asarray(getattr(padded, name))[..., m:]), name

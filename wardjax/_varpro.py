@@ -122,13 +122,33 @@ class Prepared(NamedTuple):
 GRID_MIN_SAMPLES = 64
 
 
-def prepare(f, u, v, g, w, iso: bool = True) -> Prepared:
+def _grid_subsample(n_pad: int, n):
+    """Indices and 0/1 weights of the grid subsample: every ``max(1, ⌊n/64⌋)``-th of the first ``n`` samples.
+
+    ``n`` is ``None`` (all ``n_pad`` samples are data: a static slice) or a
+    traced count of data samples, the rest padding (see
+    :mod:`wardjax._shapes`); then the same samples are gathered into
+    ``min(n_pad, 128)`` slots (``⌈n / max(1, ⌊n/64⌋)⌉ ≤ 127``), the slots past
+    them weighted 0, so the grid sees exactly what it would unpadded.
+    """
+    if n is None:
+        return slice(0, None, max(1, n_pad // GRID_MIN_SAMPLES)), None
+    stride = jnp.maximum(n // GRID_MIN_SAMPLES, 1)
+    idx = jnp.arange(min(n_pad, 2 * GRID_MIN_SAMPLES)) * stride
+    keep = idx < n
+    return jnp.where(keep, idx, 0), keep
+
+
+def prepare(f, u, v, g, w, iso: bool = True, n=None) -> Prepared:
     """Centre the data and build the per-sample streams of one scanline.
 
     ``f`` (3, N), ``u, v, g`` (N,), ``w`` (C, N) (sample axis last) with
-    invalid samples already at weight 0 and ``f`` finite there.
+    invalid samples already at weight 0 and ``f`` finite there. ``n``
+    (traced int, optional): only the first ``n`` samples are data, the rest
+    zero-weight padding; it fixes the grid subsample, so that padding does
+    not change the fit.
     """
-    c, n = w.shape
+    c, n_pad = w.shape
     m = 3.0 / c
     wsum = jnp.sum(w, axis=-1)
     has = wsum > 0
@@ -148,13 +168,18 @@ def prepare(f, u, v, g, w, iso: bool = True) -> Prepared:
     n_obs = (m * jnp.sum((w > 0).astype(w.dtype))).astype(jnp.int32)
     n_samples = jnp.sum(valid.astype(w.dtype)).astype(jnp.int32)
     theta_guess = jnp.log(initial_alpha(jnp.sum(ft, axis=0), t, valid))
-    stride = max(1, n // GRID_MIN_SAMPLES)
-    sub = slice(0, None, stride)
-    grid_wsum = jnp.sum(w[:, sub], axis=-1)
+    sub, keep = _grid_subsample(n_pad, n)
+
+    def pick(a):  # (..., N) → (..., G): the subsample, slots past the data weighted 0
+        if n is None:
+            return a[..., sub]
+        return jnp.where(jnp.reshape(keep, (1,) * (a.ndim - 1) + keep.shape), a[..., sub], 0.0)
+
+    grid_wsum = jnp.sum(pick(w), axis=-1)
     grid_wsum = jnp.where(grid_wsum > 0, grid_wsum, 1.0)
-    grid_fsum = jnp.sum((w * ft)[:, sub], axis=-1)
+    grid_fsum = jnp.sum(pick(w * ft), axis=-1)
     return Prepared(x, gw, gwf, g2w, wsum, fbar, k0, channels_ok, has, n_obs, n_samples, theta_guess,
-                    gw[:, sub], gwf[sub], g2w[sub], t[sub], grid_wsum, grid_fsum)
+                    pick(gw), pick(gwf), pick(g2w), t[sub], grid_wsum, grid_fsum)
 
 
 def basis(theta, u, v, g, iso: bool):

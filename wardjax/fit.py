@@ -40,7 +40,7 @@ import jax.numpy as jnp
 import numpy as np
 import optimistix as optx
 
-from . import _varpro
+from . import _shapes, _varpro
 from ._status import Status
 from .ward import NORMALIZATIONS, Normalization, WardParams, ward_geometry
 
@@ -285,8 +285,9 @@ def _geometry_chunk(f, wi, wo, mask, weights, *, normalization, dtype):
 
 
 @functools.partial(jax.jit, static_argnames=("iso",))
-def _moments_chunk(f, u, v, g, w, *, iso):
-    return jax.vmap(lambda *a: _varpro.prepare(*a, iso))(f, u, v, g, w)
+def _moments_chunk(f, u, v, g, w, n, *, iso):
+    """:func:`~wardjax._varpro.prepare` of each scanline; ``n`` (traced) samples are data, the rest padding."""
+    return jax.vmap(lambda *a: _varpro.prepare(*a, iso, n))(f, u, v, g, w)
 
 
 @functools.partial(jax.jit, static_argnames=("iso", "rtol"))
@@ -294,10 +295,10 @@ def _search_chunk(prepared, *, iso, rtol):
     return jax.vmap(lambda p: _varpro.solve_scanline(p, iso=iso, rtol=rtol))(prepared)
 
 
-def _fast_chunk(f, wi, wo, mask, weights, *, iso, rtol, normalization, dtype):
+def _fast_chunk(f, wi, wo, mask, weights, n, *, iso, rtol, normalization, dtype):
     # Geometry and moments as separate programs too: ~25 % less CPU than one.
     parts = _geometry_chunk(f, wi, wo, mask, weights, normalization=normalization, dtype=dtype)
-    return _search_chunk(_moments_chunk(*parts, iso=iso), iso=iso, rtol=rtol)
+    return _search_chunk(_moments_chunk(*parts, n, iso=iso), iso=iso, rtol=rtol)
 
 
 @functools.partial(jax.jit, static_argnames=("dtype",))
@@ -398,15 +399,34 @@ def fit_scanlines(
     return _assemble(sol, data, model, normalization, solver)
 
 
+# What a padded sample of each input of ``data = (f, wi, wo, mask, weights)`` holds: unusable, weight 0.
+_SAMPLE_FILL = (np.nan, np.nan, np.nan, False, 0.0)
+
+
+def _pad_samples(data, n: int):
+    """``data`` with the sample axis padded to ``n`` by unusable samples (zero weight after :func:`_clean`)."""
+    return tuple(None if a is None else _shapes.pad_to_shape(a, a.shape[:1] + (n,), fill)
+                 for a, fill in zip(data, _SAMPLE_FILL))
+
+
 def _solve(data, *, iso, normalization, solver, dtype, chunk) -> _varpro.ScanlineSolution:
-    """Run the kernel over ``data = (f, wi, wo, mask, weights)`` in chunks; float64 NumPy results."""
+    """Run the kernel over ``data = (f, wi, wo, mask, weights)`` in chunks; float64 NumPy results.
+
+    The fast kernel sees the samples padded to :func:`~wardjax._shapes.bucket`
+    of their number (zero weight, the true count passed as data), so batches
+    whose scanlines differ a little in length share one compiled program.
+    """
     rtol = 0.0 if dtype == np.float64 else 64 * float(np.finfo(dtype).eps)
+    n_true = data[0].shape[1]
+    if solver == "fast":
+        data = _pad_samples(data, _shapes.bucket(n_true))
     with jax.enable_x64(True):
+        n = jnp.asarray(n_true, jnp.int32)
         pieces = []
         for start, stop, rows in _buckets(data[0].shape[0], chunk):
             args = [None if a is None else jax.device_put(_pad(a[start:stop], rows)) for a in data]
             if solver == "fast":
-                out = _fast_chunk(*args, iso=iso, rtol=rtol, normalization=normalization, dtype=dtype)
+                out = _fast_chunk(*args, n, iso=iso, rtol=rtol, normalization=normalization, dtype=dtype)
             else:
                 out = _optimistix_chunk(*_clean(*args, dtype), normalization=normalization)
             pieces.append((out, stop - start))  # dispatched asynchronously
@@ -526,11 +546,14 @@ def _joint_residual(y, a: _JointArgs, iso: bool):
 
 def _combined(res: ScanlineFit, model: str, *, errors: str, max_steps: int, rtol: float) -> CombinedFit:
     iso = model == "isotropic"
-    f, wi, wo, mask, weights = res._data
     k = 1 if iso else 2
-    f_c, wi_c, wo_c, w_c = (np.asarray(a) for a in _clean_jit(
-        *(None if a is None else jnp.asarray(a) for a in (f, wi, wo, mask, weights)),
-        dtype=np.dtype(np.float64)))
+    # Cleaned with both axes padded to bucket sizes (padded samples unusable), so that batches of
+    # slightly different shapes share every compiled program below.
+    s_true, n_true = res._data[0].shape[:2]
+    data = [None if a is None else _shapes.pad_to_shape(a, (_shapes.bucket(s_true),), fill)
+            for a, fill in zip(_pad_samples(res._data, _shapes.bucket(n_true)), _SAMPLE_FILL)]
+    f_c, wi_c, wo_c, w_c = (np.asarray(a)[:s_true] for a in _clean_jit(
+        *(None if a is None else jnp.asarray(a) for a in data), dtype=np.dtype(np.float64)))
     # Every scanline with usable data takes part, including those whose own fit
     # saw no lobe: a scanline beside the highlight says where the lobe is *not*,
     # which is exactly what constrains αx.
@@ -555,7 +578,7 @@ def _combined(res: ScanlineFit, model: str, *, errors: str, max_steps: int, rtol
     # joint model is linear in every ρd and the shared ρs), not the per-scanline
     # fits, which a strong texture can spoil.
     prepared = _moments_chunk(jnp.swapaxes(args.f, -1, -2), args.u, args.v, args.g, jnp.swapaxes(args.w, -1, -2),
-                              iso=True)  # the geometry above, sample axis last
+                              jnp.asarray(n_true, jnp.int32), iso=True)  # the geometry above, sample axis last
     log_a, rs0 = (float(v) for v in _joint_grid_start(prepared))
     y = jnp.asarray([math.log(max(rs0, 1e-6))] + [log_a] * k, jnp.float64)
     n_obs = int(np.sum(np.broadcast_to(np.asarray(args.w), args.f.shape) > 0))
@@ -605,7 +628,7 @@ def _combined(res: ScanlineFit, model: str, *, errors: str, max_steps: int, rtol
     # through ∂ρd/∂(ρs, α); the two are uncorrelated (projected residual ⟂ means).
     wsum = np.sum(np.broadcast_to(np.asarray(args.w), args.f.shape), axis=1)[:n_use]  # (S, 3)
     noise_var = (np.pi / n_use) ** 2 * np.sum(scale / np.where(wsum > 0, wsum, np.inf), axis=0)
-    grad = np.asarray(_joint_rho_d_mean_grad(jnp.asarray(y), args, iso, n_use)) / nat[None, :]
+    grad = np.asarray(_joint_rho_d_mean_grad(jnp.asarray(y), args, iso, jnp.asarray(n_use))) / nat[None, :]
     rho_d_var = noise_var + np.einsum("ip,pq,iq->i", grad, cov, grad)
 
     rho_d_full = np.full((len(res), 3), np.nan)
@@ -657,8 +680,14 @@ def _joint_grid_start(prepared):
 
 
 @eqx.filter_jit
-def _joint_rho_d_mean_grad(y, args: _JointArgs, iso: bool, n_use: int):
-    fn = lambda yy: jnp.pi * _joint_rho_d(yy[0], yy[1:], args, iso)[0][:n_use].mean(0)  # noqa: E731
+def _joint_rho_d_mean_grad(y, args: _JointArgs, iso: bool, n_use):
+    """``∂ρ̄d/∂y`` of the mean ρd over the first ``n_use`` (traced) rows; the rest are padding."""
+    real = (jnp.arange(args.f.shape[0]) < n_use)[:, None]
+
+    def fn(yy):
+        rho_d = _joint_rho_d(yy[0], yy[1:], args, iso)[0]
+        return jnp.pi * jnp.sum(jnp.where(real, rho_d, 0.0), axis=0) / n_use
+
     return jax.jacfwd(fn)(y)
 
 
