@@ -263,12 +263,12 @@ def test_binning_censors_a_bin_holding_a_clipped_pixel():
 
 
 def test_captures_of_one_rig_share_one_compiled_reconstruction(tmp_path, monkeypatch):
-    # reconstruct_capture pads the probe's band and the standard's crop to bucketed sizes (pipeline._bucket), so
+    # reconstruct_capture pads the probe's band and the standard's crop to bucketed sizes (_shapes.bucket), so
     # two captures whose probe and standard sit a little differently compile _reconstruct_band once, not once
     # each (seconds per compile on a real image), and reconstruct what the unpadded kernel does.
     import dataclasses
 
-    from wardjax import pipeline
+    from wardjax import _shapes, pipeline
     from wardjax.capture_sim import default_rig
 
     p = CASES["iso_marble_srgb8"][0]
@@ -276,10 +276,10 @@ def test_captures_of_one_rig_share_one_compiled_reconstruction(tmp_path, monkeyp
     moved = dataclasses.replace(base, probe=(6.0, 120.0, -148.0, 150.0), standard=(-119.0, -3.0, -150.0, 149.0))
     caps = [wj.simulate_capture(p, tmp_path / f"c{i}", seed=i, rig=r, texture="marble", headroom=2.0)
             for i, r in enumerate((base, moved))]
-    bucket = pipeline._bucket
+    bucket = _shapes.bucket
 
     def reconstruct(bucket_fn):
-        monkeypatch.setattr(pipeline, "_bucket", bucket_fn)
+        monkeypatch.setattr(_shapes, "bucket", bucket_fn)
         pipeline._reconstruct_band.clear_cache()
         recs = [pipeline.reconstruct_capture(c, clip_bounds=True) for c in caps]
         return recs, pipeline._reconstruct_band._cache_size()
@@ -298,7 +298,7 @@ def test_captures_of_one_rig_share_one_compiled_reconstruction(tmp_path, monkeyp
 
 
 def test_bucket_sizes():
-    from wardjax.pipeline import _bucket
+    from wardjax._shapes import bucket as _bucket
 
     assert [_bucket(n) for n in (1, 8, 9, 33, 59, 64, 65, 300, 512, 513, 3000)] == \
         [8, 8, 16, 40, 64, 64, 80, 320, 512, 640, 3072]
@@ -306,3 +306,95 @@ def test_bucket_sizes():
     m = np.array([_bucket(int(k)) for k in n])
     assert np.all(m >= n) and np.all(m <= np.maximum(1.25 * n, n + 7))
     assert len(np.unique(m[(n > 1024) & (n <= 4096)])) == 8  # four sizes an octave
+
+
+class _Compiles:
+    """The names of the programs XLA compiles inside the ``with`` (every jitted function and eager op)."""
+
+    def __enter__(self):
+        import logging
+        import re
+
+        import jax
+
+        self.names, self._logger = [], logging.getLogger("jax")
+        pattern = re.compile(r"Finished XLA compilation of (.+?) in ")
+
+        class Handler(logging.Handler):
+            def emit(h, record):  # noqa: N805
+                m = pattern.search(record.getMessage())
+                if m:
+                    self.names.append(m.group(1))
+
+        self._handler, self._level = Handler(), self._logger.level
+        self._logger.addHandler(self._handler)
+        self._logger.setLevel(logging.WARNING)
+        self._log = jax.log_compiles(True)
+        self._log.__enter__()
+        return self
+
+    def __exit__(self, *exc):
+        self._log.__exit__(*exc)
+        self._logger.removeHandler(self._handler)
+        self._logger.setLevel(self._level)
+
+
+def test_captures_of_one_rig_share_every_compiled_program_of_the_fit(tmp_path, monkeypatch):
+    # Not only the reconstruction: the texture bands, the per-scanline and joint fits, the texture-field
+    # errors and the diagnostics all see shapes padded to _shapes.bucket (padded samples at zero weight),
+    # so a second capture of the rig whose probe sits a little differently compiles nothing (unbucketed:
+    # ~60 programs, ~14 s at 96 × 72 on two cores) and fits what the unpadded programs fit.
+    import dataclasses
+
+    import jax
+
+    from wardjax import _shapes, pipeline
+    from wardjax.capture_sim import default_rig
+
+    p = CASES["iso_marble_srgb8"][0]
+    base = default_rig((96, 72))
+    moved = dataclasses.replace(base, probe=(6.0, 120.0, -148.0, 150.0), standard=(-119.0, -3.0, -150.0, 149.0))
+    caps = [wj.simulate_capture(p, tmp_path / f"c{i}", seed=i, rig=r, texture="marble", headroom=2.0)
+            for i, r in enumerate((base, moved))]
+    bucket = _shapes.bucket
+
+    def fit(bucket_fn):
+        monkeypatch.setattr(_shapes, "bucket", bucket_fn)
+        jax.clear_caches()
+        first = pipeline.fit_capture(caps[0])
+        with _Compiles() as c:
+            second = pipeline.fit_capture(caps[1])
+        return (first, second), c.names
+
+    exact, compiled_exact = fit(lambda n: n)
+    padded, compiled_padded = fit(bucket)
+    assert compiled_padded == []
+    assert len(compiled_exact) > 10 and {"jit(_extract)", "jit(_geometry_chunk)", "jit(_solve_joint)"} <= \
+        set(compiled_exact)
+    assert exact[0].scanlines.params.rho_s.shape != exact[1].scanlines.params.rho_s.shape  # the shapes differ
+
+    # Padded samples carry zero weight, so only the order of the sums changes: rounding. An optimum's location
+    # is determined only to ~√eps of its curvature scale (χ² is flat there), so the fitted parameters and σ
+    # move by up to ~1e-8 relative (~1e-6 σ), as they do when the samples are merely reversed; χ² to eps.
+    eps = np.finfo(np.float64).eps
+    for a, b in zip(exact, padded):
+        np.testing.assert_array_equal(b.rho_d, a.rho_d)  # elementwise: bit for bit
+        assert a.combined.status == b.combined.status == wj.Status.CONVERGED
+        for fa, fb in ((a.combined, b.combined), (a.radiance, b.radiance)):
+            for what in ("params", "stderr"):
+                for name in ("rho_d", "rho_s", "alpha_x", "alpha_y"):
+                    np.testing.assert_allclose(getattr(getattr(fb, what), name), getattr(getattr(fa, what), name),
+                                               rtol=np.sqrt(eps), atol=0, err_msg=f"{what}.{name}")
+            np.testing.assert_allclose(fb.covariance, fa.covariance, rtol=np.sqrt(eps), atol=0)
+            np.testing.assert_allclose(fb.chi2, fa.chi2, rtol=16 * eps, atol=0)
+            assert fb.dof == fa.dof and fb.n_scanlines == fa.n_scanlines
+        sa, sb = a.scanlines, b.scanlines
+        np.testing.assert_array_equal(sb.status, sa.status)
+        np.testing.assert_array_equal(sb.dof, sa.dof)
+        ok = sa.status == wj.Status.CONVERGED
+        assert ok.sum() >= 2
+        for name in ("rho_d", "rho_s", "alpha_x"):
+            pa, pb, se = (np.asarray(getattr(x, name))[ok] for x in (sa.params, sb.params, sa.stderr))
+            assert np.all(np.abs(pb - pa) <= 1e-5 * se), name
+            np.testing.assert_allclose(np.asarray(getattr(sb.stderr, name))[ok], se, rtol=1e-6, err_msg=name)
+        np.testing.assert_allclose(sb.chi2[ok], sa.chi2[ok], rtol=1e3 * eps)

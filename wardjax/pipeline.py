@@ -25,6 +25,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from . import _shapes
 from ._status import Status
 from .capture import CAPTURE_FILE, Capture, CaptureError
 from .fit import CombinedFit, ScanlineFit, fit_scanlines
@@ -203,6 +204,20 @@ def _lobe_and_grad(wi, wo, a, normalization):
     return lobe(a), jnp.moveaxis(jax.jacfwd(lobe)(a), -1, 0), geom.valid
 
 
+def _lobe(wi, wo, a, normalization):
+    """:func:`_lobe_and_grad` (float64 NumPy) on ``(S, N, 3)`` directions padded to bucketed ``S`` and ``N``.
+
+    Elementwise, so the padding (sliced off) changes nothing; it lets captures
+    of one rig share the compiled program.
+    """
+    s, n = wi.shape[:2]
+    shape = (_shapes.bucket(s), _shapes.bucket(n))
+    with jax.enable_x64(True):
+        b, db, valid = _lobe_and_grad(*(jnp.asarray(_shapes.pad_to_shape(d, shape), jnp.float64) for d in (wi, wo)),
+                                      jnp.asarray(a, jnp.float64), normalization)
+    return np.asarray(b)[:s, :n], np.asarray(db)[:, :s, :n], np.asarray(valid)[:s, :n]
+
+
 def texture_field_covariance(F, WI, WO, cols, params: WardParams, model: str, normalization: str) -> TextureErrors:
     r"""Covariance of the joint (ρs, α…) with the ρd texture treated as a stationary random field.
 
@@ -257,10 +272,8 @@ def texture_field_covariance(F, WI, WO, cols, params: WardParams, model: str, no
     """
     iso = model == "isotropic"
     rs, ax, ay = float(params.rho_s), float(params.alpha_x), float(params.alpha_y)
-    with jax.enable_x64(True):
-        a0 = jnp.asarray([ax] if iso else [ax, ay], jnp.float64)
-        b, dlobe, valid = (np.asarray(x) for x in _lobe_and_grad(jnp.asarray(WI, jnp.float64),
-                                                                 jnp.asarray(WO, jnp.float64), a0, normalization))
+    b, dlobe, valid = _lobe(np.asarray(WI, np.float64), np.asarray(WO, np.float64), [ax] if iso else [ax, ay],
+                            normalization)
     F = np.asarray(F, np.float64)
     w = (np.isfinite(F) & valid[..., None]).astype(np.float64)  # (S, N, 3)
     basis = np.concatenate([b[None], rs * dlobe], 0)  # (P, S, N): ∂(ρs b)/∂θ
@@ -356,7 +369,7 @@ def _sample_bilinear_jnp(image, uv, size):
 
     ``image`` is ``(h', w', C + 3)``: ``C`` values, then the 3 clipped flags
     as 0/1. Only its first ``size = (w, h)`` (int32, traced) columns and rows
-    are the image; the rest is padding (see :func:`_bucket`), never read.
+    are the image; the rest is padding (see :func:`~wardjax._shapes.bucket`), never read.
     """
     c3 = image.shape[-1]
     w, h = size[0], size[1]
@@ -382,26 +395,6 @@ def _masks_kernel(k, rows, *, width: int, height: int):
     return g.in_probe, g.in_standard
 
 
-def _bucket(n: int) -> int:
-    """The size a compiled kernel is padded to: the smallest ``m ≥ n`` on the ladder ``2^j · {5, 6, 7, 8}/4``.
-
-    For ``2^j < n ≤ 2^(j+1)``, ``m`` is ``n`` rounded up to a multiple of
-    ``max(2^(j−2), 8)``: at most 25 % (or 7) over, so captures whose probe and
-    standard sit in slightly different places share one compiled program
-    instead of compiling (seconds) once per capture.
-    """
-    n = max(int(n), 1)
-    q = max(1 << max((n - 1).bit_length() - 3, 0), 8)
-    return -(-n // q) * q
-
-
-def _pad_to_shape(a: np.ndarray, shape: tuple[int, ...]) -> np.ndarray:
-    """``a`` zero-padded at the end of its leading axes to ``shape``."""
-    if a.shape[: len(shape)] == shape:
-        return a
-    return np.pad(a, [(0, t - n) for t, n in zip(shape, a.shape)] + [(0, 0)] * (a.ndim - len(shape)))
-
-
 @functools.partial(jax.jit, static_argnames=("width", "height", "ncols"))
 def _reconstruct_band(k, rows, col0, lit, dark, clipped, std, std_size, offset, rho, noise_floor, saturation, *,
                       width: int, height: int, ncols: int):
@@ -414,7 +407,7 @@ def _reconstruct_band(k, rows, col0, lit, dark, clipped, std, std_size, offset, 
     dark, clipped, of which the first ``std_size = (w, h)`` are real (the rest
     padding); ``offset`` its ``(u, v)`` origin in the image. Columns ``col0 …
     col0 + ncols − 1`` (those through the probe, and padding past them). The
-    band's and the crop's shapes are bucketed (:func:`_bucket`), so they
+    band's and the crop's shapes are bucketed (:func:`~wardjax._shapes.bucket`), so they
     and ``ncols`` vary little between captures of one rig.
 
     Also the clip bound of each probe pixel whose *own* lit value is clipped
@@ -502,22 +495,23 @@ def reconstruct_capture(cap, *, band_rows: int = 512, dtype=np.float32, clip_bou
         std = np.concatenate([lit_std, dark_std, clip_std.astype(np.float32)], -1)
         del lit_std, dark_std, clip_std
         std_size = jnp.asarray([std.shape[1], std.shape[0]], jnp.int32)
-        std = jnp.asarray(_pad_to_shape(std, (_bucket(std.shape[0]), _bucket(std.shape[1]))), dtype)
+        bucket, pad = _shapes.bucket, _shapes.pad_to_shape
+        std = jnp.asarray(pad(std, (bucket(std.shape[0]), bucket(std.shape[1]))), dtype)
         offset = jnp.asarray([box[1].start, box[0].start], dtype)
         rho = jnp.asarray(np.broadcast_to(cap.rho_standard, (3,)), dtype)
         nf = jnp.asarray(cfg.fit.noise_floor, dtype)
         sat = jnp.asarray(cap.saturation, dtype)
         rows_p, cols = pbox
         step = max(1, min(hb, rows_p.stop - rows_p.start))  # rows per band; the kernel sees them padded
-        band = (_bucket(step), _bucket(cols.stop - cols.start))
+        band = (bucket(step), bucket(cols.stop - cols.start))
         zeros = np.zeros(band + (3,), np.float32)
         kw = {**dims, "ncols": band[1]}
         for r0 in range(rows_p.start, rows_p.stop, step):
             r1 = min(r0 + step, rows_p.stop)
             n, m, sl = r1 - r0, cols.stop - cols.start, (slice(r0, r1), cols)
-            dark = zeros if cap.dark is None else _pad_to_shape(cap.dark[sl], band)
+            dark = zeros if cap.dark is None else pad(cap.dark[sl], band)
             out = _reconstruct_band(k, jnp.arange(r0, r0 + band[0], dtype=dtype), jnp.asarray(cols.start, dtype),
-                                    _pad_to_shape(cap.lit[sl], band), dark, _pad_to_shape(cap.lit_clipped[sl], band),
+                                    pad(cap.lit[sl], band), dark, pad(cap.lit_clipped[sl], band),
                                     std, std_size, offset, rho, nf, sat, **kw)
             for dst, src in zip((f_r, flags, wi, wo, points, f_clip), out):
                 if dst is not None:
@@ -697,25 +691,21 @@ def fit_capture(cap: Capture, *, max_fit_samples: int = 50_000, band_rows: int =
                                                                  RADIANCE_NORMALIZATION))
 
     # ---------------------------------------------------------------- texture
+    # Bands padded to one bucketed shape (NaN values, sliced off): one compilation for the whole image,
+    # shared by captures of one rig.
     rho_d = np.full((h, w, 3), np.nan, np.float32)
     hb = min(band_rows, r1 - r0)
+    band = (_shapes.bucket(hb), _shapes.bucket(c1 - c0))
     for s0 in range(r0, r1, hb):
         s1 = min(s0 + hb, r1)
         sl = (slice(s0, s1), slice(c0, c1))
-        fb, wib, wob = f_r[sl], wi[sl], wo[sl]
-        if s1 - s0 < hb:  # pad to the band shape: one compilation for the whole image
-            padn = hb - (s1 - s0)
-            fb = np.pad(fb, [(0, padn), (0, 0), (0, 0)], constant_values=np.nan)
-            wib = np.pad(wib, [(0, padn), (0, 0), (0, 0)])
-            wob = np.pad(wob, [(0, padn), (0, 0), (0, 0)])
-        out = extract_rho_d(fb, wib, wob, comb.params, normalization=norm)[: s1 - s0]
+        fb, wib, wob = (_shapes.pad_to_shape(a, band, fill) for a, fill in ((f_r[sl], np.nan), (wi[sl], 0.0),
+                                                                            (wo[sl], 0.0)))
+        out = extract_rho_d(fb, wib, wob, comb.params, normalization=norm)[: s1 - s0, : c1 - c0]
         rho_d[sl] = np.where(probe[sl][..., None], out, np.nan)
 
     # ---------------------------------------------------------------- diagnostics
-    with jax.enable_x64(True):
-        geom = ward_geometry(WI, WO, norm)
-        spec = float(comb.params.rho_s) * np.asarray(
-            ward_specular(geom, float(comb.params.alpha_x), float(comb.params.alpha_y)), np.float64)
+    spec = float(comb.params.rho_s) * _lobe(WI, WO, [float(comb.params.alpha_x), float(comb.params.alpha_y)], norm)[0]
     rd_s = comb.rho_d_scanlines
     model_f = rd_s[:, None, :] / np.pi + spec[..., None]
     resid = F - model_f
