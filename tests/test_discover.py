@@ -72,6 +72,30 @@ def test_absorbed_gamma_is_named_not_a_partial_match():
     assert abs(rep.steps[0].params["eps"] - case.truth["strength"]) < 4 * rep.steps[0].stderr["eps"]
 
 
+def test_solo_fits_equal_batched_fits(reports, monkeypatch):
+    """Large data solve each fit alone instead of in vmapped batches: the same effects, gaps, parameters
+    and evidence as the batched solve that small data use."""
+    from wardjax.effects import _discover
+
+    case, rep = reports["anisotropy"]  # batched: 3,072 residuals < _SOLO_MIN_OBS
+    assert rep.n_obs < _discover._SOLO_MIN_OBS
+    monkeypatch.setattr(_discover, "_SOLO_MIN_OBS", 0)
+    solo = discover(ScanlineModel(), case.data)
+    tol = dict(rtol=1e-10, atol=0)
+    assert solo.found == rep.found == ["anisotropy"]
+    np.testing.assert_allclose(solo.gap, rep.gap, **tol)
+    for a, b in zip((solo.baseline, solo.final), (rep.baseline, rep.final)):
+        np.testing.assert_allclose(a.u, b.u, rtol=1e-10, atol=1e-12)
+    for sa, sb in zip(solo.steps, rep.steps):
+        for k in sb.params:
+            np.testing.assert_allclose(sa.params[k], sb.params[k], rtol=1e-10, atol=1e-12)
+            np.testing.assert_allclose(sa.stderr[k], sb.stderr[k], rtol=1e-8)
+        assert [c.effect for c in sa.candidates] == [c.effect for c in sb.candidates]
+        np.testing.assert_allclose([c.delta_chi2 for c in sa.candidates], [c.delta_chi2 for c in sb.candidates],
+                                   rtol=1e-8, atol=1e-8)
+        assert [c.structure_p for c in sa.candidates] == [c.structure_p for c in sb.candidates]
+
+
 def test_out_of_library_effect_is_reported_unexplained(reports):
     """Orange peel (periodic waviness) is not in the library: no confident name, unexplained structure."""
     case, rep = reports[bench.OUT_OF_LIBRARY]

@@ -72,6 +72,7 @@ __all__ = ["discover"]
 _N_BINS = 20
 _LINEAR_SOLVER = lx.QR()
 _PLOT_MAX = 20_000
+_SOLO_MIN_OBS = 20_000  # from this many residuals on, each fit is solved alone (_fit_batch)
 
 
 class _Layout:
@@ -163,29 +164,64 @@ def _solve_batch(u0, idx, kmask, active, prior_w, data, *, model, effects, layou
     return jax.vmap(one)(u0, idx, kmask, active)
 
 
-def _fit_batch(jobs, layout, model, effects, data, k_pad, b_pad, max_steps, chunk):
-    """Solve a list of jobs ``(u0, free indices, active effect indices)`` in padded batches."""
-    key = layout.key
-    n_e = len(effects)
+def _job_rows(jobs, layout, n_e, width):
+    """Pad each job ``(u0, free indices, active effect indices)`` to ``width`` free slots.
+
+    Slots past a job's free parameters point at the dummy entry ``layout.size``
+    with ``kmask`` false: the solver sees a zero Jacobian column there.
+    """
     rows = []
     for u0, free, act in jobs:
-        idx = np.full(k_pad, layout.size, np.int32)
+        idx = np.full(width, layout.size, np.int32)
         idx[: len(free)] = free
-        km = np.zeros(k_pad, bool)
+        km = np.zeros(width, bool)
         km[: len(free)] = True
         a = np.zeros(n_e, bool)
         a[list(act)] = True
         rows.append((u0, idx, km, a))
+    return rows
+
+
+def _solve_rows(rows, layout, model, effects, data, max_steps):
+    """One ``_solve_batch`` call on stacked rows; host arrays back."""
+    U0, IDX, KM, A = (np.stack(col) for col in zip(*rows))
+    with jax.enable_x64(True):
+        u, chi2, jtj, ok, _ = _solve_batch(jnp.asarray(U0), jnp.asarray(IDX), jnp.asarray(KM), jnp.asarray(A),
+                                           jnp.asarray(layout.prior_w), data, model=model, effects=effects,
+                                           layout_key=layout.key, max_steps=max_steps)
+        return tuple(np.asarray(x) for x in (u, chi2, jtj, ok))
+
+
+def _fit_batch(jobs, layout, model, effects, data, k_pad, b_pad, max_steps, chunk, solo=False):
+    """Solve a list of jobs ``(u0, free indices, active effect indices)``; one result per job, in order.
+
+    Batched (``solo=False``): chunks of ``min(b_pad, chunk)`` jobs, each padded
+    to ``k_pad`` free slots, so that every call has one shape and one compiled
+    program serves the whole run — what pays on small data, where a call costs
+    little more than its overhead.
+
+    Solo (``solo=True``, large data): each job alone, so that it takes its
+    own number of LM steps. Under ``vmap`` the ``while_loop`` runs every
+    member until the slowest converges, the padding copies too (the baseline's
+    3 starts padded to the step's 16 candidate starts ran 16 fits); on
+    ``N ≳ 10⁴`` residuals an LM step (a Jacobian of ``k_pad`` JVP columns over
+    all ``N`` residuals and an ``(N + k_pad) × k_pad`` QR) costs far more than
+    a call's overhead, so that waste dominated. Same width ``k_pad``, hence
+    one compiled program and the same arithmetic per fit: the same fits as
+    batched (to rounding). Solving at each job's own width instead would
+    save more per step but compiles once per width and moves the fits by
+    ~10⁻⁹ (QR rounding, amplified by the LM stopping rule).
+    """
+    rows = _job_rows(jobs, layout, len(effects), k_pad)
+    if solo:
+        chunk = width = 1
+    else:
+        width = min(b_pad, chunk)
     out = []
     for c0 in range(0, len(rows), chunk):
         part = rows[c0: c0 + chunk]
-        pad = part + [part[0]] * (min(b_pad, chunk) - len(part)) if len(part) < min(b_pad, chunk) else part
-        U0, IDX, KM, A = (np.stack(col) for col in zip(*pad))
-        with jax.enable_x64(True):
-            u, chi2, jtj, ok, _ = _solve_batch(jnp.asarray(U0), jnp.asarray(IDX), jnp.asarray(KM), jnp.asarray(A),
-                                                 jnp.asarray(layout.prior_w), data, model=model, effects=effects, layout_key=key,
-                                            max_steps=max_steps)
-            u, chi2, jtj, ok = (np.asarray(x) for x in (u, chi2, jtj, ok))
+        pad = part + [part[0]] * (width - len(part)) if len(part) < width else part
+        u, chi2, jtj, ok = _solve_rows(pad, layout, model, effects, data, max_steps)
         for i in range(len(part)):
             out.append((u[i], float(chi2[i]), jtj[i], bool(ok[i]), part[i][1], part[i][2]))
     return out
@@ -323,6 +359,9 @@ def discover(
     base = model.base_params(data)
     layout = _Layout(base, testable)
     n_obs = int(data.n_obs)
+    solo = n_obs >= _SOLO_MIN_OBS
+    with jax.enable_x64(True):  # on the device once, not once per solve
+        data_dev = jax.tree_util.tree_map(jnp.asarray, data)
     n_prof = int(model.n_profiled(data))
     ln_n = math.log(n_obs)
     k_pad = len(base) + max([len(e.params) for e in testable] + [0]) + 4
@@ -343,7 +382,7 @@ def discover(
         jobs.append((u0, base_free, ()))
     n_cand_jobs = sum(len(e.starts()) for e in testable)
     b_pad = max(len(jobs), n_cand_jobs, 1)
-    res = _fit_batch(jobs, layout, model, testable, data, k_pad, b_pad, lm_steps, chunk)
+    res = _fit_batch(jobs, layout, model, testable, data_dev, k_pad, b_pad, lm_steps, chunk, solo)
     best = min(res, key=lambda t: t[1] if np.isfinite(t[1]) else np.inf)
 
     def state_of(r, active):
@@ -365,8 +404,8 @@ def discover(
         vals = layout.unpack(jnp.asarray(st.u), names_all)
         act = {e.name: (i in st.active) for i, e in enumerate(testable)}
         with jax.enable_x64(True):
-            r = np.asarray(model.residuals(vals, act, testable, data))
-            pred, _, cens = model.predict(vals, act, testable, data)
+            r = np.asarray(model.residuals(vals, act, testable, data_dev))
+            pred, _, cens = model.predict(vals, act, testable, data_dev)
             pred = np.asarray(pred)
         return r, pred, np.asarray(cens)
 
@@ -399,7 +438,8 @@ def discover(
                 owner.append(i)
         if len(free_cur) + 2 > k_pad:
             break
-        res = _fit_batch(cand_jobs, layout, model, testable, data, k_pad, b_pad, lm_steps, chunk)
+        structure_p_of = {}  # binned test per covariate: the residuals and covariates are fixed within a step
+        res = _fit_batch(cand_jobs, layout, model, testable, data_dev, k_pad, b_pad, lm_steps, chunk, solo)
         m = len(remaining)
         cands: list[Candidate] = []
         by_effect: dict[int, FitState] = {}
@@ -412,7 +452,9 @@ def discover(
             cov_name = e.covariate
             sp = math.nan
             if cov_name in covs_cur:
-                sp = _binned_test(r_flat, _flat(covs_cur[cov_name], mask))[2]
+                if cov_name not in structure_p_of:
+                    structure_p_of[cov_name] = _binned_test(r_flat, _flat(covs_cur[cov_name], mask))[2]
+                sp = structure_p_of[cov_name]
             if chosen is None:
                 cands.append(Candidate(e.name, e.k, math.nan, -math.inf, 1.0, 0.0, sp, False, None, math.nan))
                 continue
