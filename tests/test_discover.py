@@ -93,7 +93,9 @@ def test_solo_fits_equal_batched_fits(reports, monkeypatch):
         assert [c.effect for c in sa.candidates] == [c.effect for c in sb.candidates]
         np.testing.assert_allclose([c.delta_chi2 for c in sa.candidates], [c.delta_chi2 for c in sb.candidates],
                                    rtol=1e-8, atol=1e-8)
-        assert [c.structure_p for c in sa.candidates] == [c.structure_p for c in sb.candidates]
+        # Residuals are computed in float64 from fits equal to 1e-10, so the structure tests agree as closely.
+        np.testing.assert_allclose([c.structure_p for c in sa.candidates], [c.structure_p for c in sb.candidates],
+                                   rtol=1e-6, atol=1e-300)
 
 
 def test_out_of_library_effect_is_reported_unexplained(reports):

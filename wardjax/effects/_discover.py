@@ -401,9 +401,9 @@ def discover(
     names_all = tuple(e.name for e in testable)
 
     def residual_view(st: FitState):
-        vals = layout.unpack(jnp.asarray(st.u), names_all)
         act = {e.name: (i in st.active) for i, e in enumerate(testable)}
-        with jax.enable_x64(True):
+        with jax.enable_x64(True):  # the parameters too: outside, jnp.asarray would round them to float32
+            vals = layout.unpack(jnp.asarray(st.u), names_all)
             r = np.asarray(model.residuals(vals, act, testable, data_dev))
             pred, _, cens = model.predict(vals, act, testable, data_dev)
             pred = np.asarray(pred)
