@@ -421,7 +421,10 @@ def _solve(data, *, iso, normalization, solver, dtype, chunk) -> _varpro.Scanlin
     if solver == "fast":
         data = _pad_samples(data, _shapes.bucket(n_true))
     with jax.enable_x64(True):
-        n = jnp.asarray(n_true, jnp.int32)
+        # Padded: the true count as data (one program per bucket). Not padded: None, the static
+        # grid slice, which is tighter than the padded gather (64 grid samples, not 128, at N = 256:
+        # ~30 % faster in float32).
+        n = None if data[0].shape[1] == n_true else jnp.asarray(n_true, jnp.int32)
         pieces = []
         for start, stop, rows in _buckets(data[0].shape[0], chunk):
             args = [None if a is None else jax.device_put(_pad(a[start:stop], rows)) for a in data]
