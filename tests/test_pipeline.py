@@ -262,20 +262,26 @@ def test_binning_censors_a_bin_holding_a_clipped_pixel():
     np.testing.assert_allclose(got.wi, np.broadcast_to([0.0, 0.6, 0.8], (4, 1, 3)))
 
 
-def test_captures_of_one_rig_share_one_compiled_reconstruction(tmp_path, monkeypatch):
-    # reconstruct_capture pads the probe's band and the standard's crop to bucketed sizes (_shapes.bucket), so
-    # two captures whose probe and standard sit a little differently compile _reconstruct_band once, not once
-    # each (seconds per compile on a real image), and reconstruct what the unpadded kernel does.
+def _two_captures_of_one_rig(tmp_path):
+    """Two 96×72 captures of one rig, the probe and the standard moved a few pixels in the second."""
     import dataclasses
 
-    from wardjax import _shapes, pipeline
     from wardjax.capture_sim import default_rig
 
     p = CASES["iso_marble_srgb8"][0]
     base = default_rig((96, 72))
     moved = dataclasses.replace(base, probe=(6.0, 120.0, -148.0, 150.0), standard=(-119.0, -3.0, -150.0, 149.0))
-    caps = [wj.simulate_capture(p, tmp_path / f"c{i}", seed=i, rig=r, texture="marble", headroom=2.0)
+    return [wj.simulate_capture(p, tmp_path / f"c{i}", seed=i, rig=r, texture="marble", headroom=2.0)
             for i, r in enumerate((base, moved))]
+
+
+def test_captures_of_one_rig_share_one_compiled_reconstruction(tmp_path, monkeypatch):
+    # reconstruct_capture pads the probe's band and the standard's crop to bucketed sizes (_shapes.bucket), so
+    # two captures whose probe and standard sit a little differently compile _reconstruct_band once, not once
+    # each (seconds per compile on a real image), and reconstruct what the unpadded kernel does.
+    from wardjax import _shapes, pipeline
+
+    caps = _two_captures_of_one_rig(tmp_path)
     bucket = _shapes.bucket
 
     def reconstruct(bucket_fn):
@@ -344,18 +350,11 @@ def test_captures_of_one_rig_share_every_compiled_program_of_the_fit(tmp_path, m
     # errors and the diagnostics all see shapes padded to _shapes.bucket (padded samples at zero weight),
     # so a second capture of the rig whose probe sits a little differently compiles nothing (unbucketed:
     # ~60 programs, ~14 s at 96 × 72 on two cores) and fits what the unpadded programs fit.
-    import dataclasses
-
     import jax
 
     from wardjax import _shapes, pipeline
-    from wardjax.capture_sim import default_rig
 
-    p = CASES["iso_marble_srgb8"][0]
-    base = default_rig((96, 72))
-    moved = dataclasses.replace(base, probe=(6.0, 120.0, -148.0, 150.0), standard=(-119.0, -3.0, -150.0, 149.0))
-    caps = [wj.simulate_capture(p, tmp_path / f"c{i}", seed=i, rig=r, texture="marble", headroom=2.0)
-            for i, r in enumerate((base, moved))]
+    caps = _two_captures_of_one_rig(tmp_path)
     bucket = _shapes.bucket
 
     def fit(bucket_fn):

@@ -109,11 +109,10 @@ def capture_data(cap: Capture, *, max_samples: int = 20_000, band_rows: int = 51
         raise CaptureError(CAPTURE_FILE, "camera", "no pixel of the image sees the probe")
     bins = _bin_scanlines(rec, max_samples)  # scanlines = image columns
     F, cens = bins.f_r, bins.censored
-    exact = np.where(cens, np.nan, F)
-    keep = np.sum(np.all(np.isfinite(exact), axis=-1), axis=1) >= MIN_SCANLINE_SAMPLES
+    keep = np.sum(np.all(np.isfinite(F) & ~cens, axis=-1), axis=1) >= MIN_SCANLINE_SAMPLES  # uncensored values
     if not keep.any():
         raise CaptureError(cfg.images.lit, None, f"no image column holds {MIN_SCANLINE_SAMPLES} usable probe values")
-    F, cens, exact = F[keep], cens[keep], exact[keep]
+    F, cens = F[keep], cens[keep]
     sigma = _noise_model(F, exact=~cens)
     return scanline_data(F, bins.wi[keep], bins.wo[keep], sigma, points=bins.points[keep],
                          lamp=np.asarray(rig.lamp, float), kind="ratio", rho_standard=float(np.mean(cap.rho_standard)),
