@@ -98,6 +98,31 @@ def test_solo_fits_equal_batched_fits(reports, monkeypatch):
                                    rtol=1e-6, atol=1e-300)
 
 
+def test_fits_stopped_at_the_step_cap_are_continued_where_they_decide(reports):
+    """With a 4-step LM cap the baseline and most candidates stop unconverged (before, the winner's ε and the
+    gaps came from such fits). The baseline, the winner and the close runner-up (coloured specular, ΔBIC within
+    half the winner's) are continued to convergence and equal the default run's; the rest are flagged as lower
+    bounds in the report."""
+    case, rep = reports["gamma"]
+    short = discover(ScanlineModel(), case.data, lm_steps=4)
+    assert short.found == rep.found == ["gamma"]
+    assert short.baseline.ok and short.steps[0].evidence.state.ok
+    np.testing.assert_allclose(short.gap, rep.gap, rtol=1e-8)
+    np.testing.assert_allclose(short.steps[0].params["eps"], rep.steps[0].params["eps"], rtol=1e-8)
+    np.testing.assert_allclose(short.steps[0].stderr["eps"], rep.steps[0].stderr["eps"], rtol=1e-6)
+    by_name = {c.effect: c for c in short.steps[0].candidates}
+    top = short.steps[0].evidence.delta_bic
+    for c in short.steps[0].candidates:
+        if c.delta_bic >= 0.5 * top:
+            assert c.converged, c.effect
+    assert by_name["coloured_specular"].converged
+    lagging = [c for c in short.steps[0].candidates if not c.converged]
+    assert lagging  # the cap does bite
+    md = short.to_markdown()
+    assert f"| {lagging[0].effect} | {lagging[0].k} | ≥ " in md and "lower bounds" in md
+    assert all(c.converged for c in rep.steps[0].candidates) and "lower bounds" not in rep.to_markdown()
+
+
 def test_out_of_library_effect_is_reported_unexplained(reports):
     """Orange peel (periodic waviness) is not in the library: no confident name, unexplained structure."""
     case, rep = reports[bench.OUT_OF_LIBRARY]

@@ -10,7 +10,10 @@ Algorithm (DESIGN.md, "Missing effects")
     3. Fit every candidate extension (current model + one effect) from
        several starts, all in one batched, jitted Levenberg–Marquardt solve,
        and score it by evidence that penalises its extra parameters.
-    4. Add the best-supported candidate if it is justified; repeat.
+    4. Add the best-supported candidate if it is justified; repeat. Fits
+       that stopped at the step cap are continued where they decide (the
+       baseline, the winner, runners-up within half its ΔBIC): γ and a
+       second lobe lie in curved valleys that can need hundreds of steps.
     5. Report the structure no library effect explains.
 
 Evidence: why BIC *and* a boundary-corrected likelihood ratio
@@ -73,6 +76,8 @@ _N_BINS = 20
 _LINEAR_SOLVER = lx.QR()
 _PLOT_MAX = 20_000
 _SOLO_MIN_OBS = 20_000  # from this many residuals on, each fit is solved alone (_fit_batch)
+_REFINE_ROUNDS = 3  # an unconverged fit that matters gets up to this many more rounds of lm_steps (discover)
+_REFINE_BIC = 0.5  # ... a runner-up matters if its ΔBIC (a lower bound) is at least this fraction of the winner's
 
 
 class _Layout:
@@ -133,13 +138,13 @@ def _unpack(key: tuple, u, names: tuple[str, ...]):
 
 
 @functools.partial(jax.jit, static_argnames=("model", "effects", "layout_key", "max_steps"))
-def _solve_batch(u0, idx, kmask, active, prior_w, data, *, model, effects, layout_key, max_steps):
+def _solve_batch(u0, a0, idx, kmask, active, prior_w, data, *, model, effects, layout_key, max_steps):
     names = tuple(e.name for e in effects)
     ctx = model.context(data) if hasattr(model, "context") else None
 
-    def one(u0, idx, kmask, active):
+    def one(u0, a0, idx, kmask, active):
         pw = jnp.where(kmask, prior_w[idx], 0.0)
-        z0 = u0[idx]
+        z0 = a0[idx]  # the priors' centres: the starting values, kept when a fit is continued
 
         def data_resid(z):
             u = u0.at[idx].set(jnp.where(kmask, z, u0[idx]))
@@ -161,32 +166,33 @@ def _solve_batch(u0, idx, kmask, active, prior_w, data, *, model, effects, layou
         u = u0.at[idx].set(jnp.where(kmask, z, u0[idx]))
         return u, chi2, jtj, ok, sol.stats["num_steps"]
 
-    return jax.vmap(one)(u0, idx, kmask, active)
+    return jax.vmap(one)(u0, a0, idx, kmask, active)
 
 
 def _job_rows(jobs, layout, n_e, width):
-    """Pad each job ``(u0, free indices, active effect indices)`` to ``width`` free slots.
+    """Pad each job ``(u0, free indices, active effect indices[, prior centres])`` to ``width`` free slots.
 
     Slots past a job's free parameters point at the dummy entry ``layout.size``
     with ``kmask`` false: the solver sees a zero Jacobian column there.
     """
     rows = []
-    for u0, free, act in jobs:
+    for u0, free, act, *anchor in jobs:
         idx = np.full(width, layout.size, np.int32)
         idx[: len(free)] = free
         km = np.zeros(width, bool)
         km[: len(free)] = True
         a = np.zeros(n_e, bool)
         a[list(act)] = True
-        rows.append((u0, idx, km, a))
+        rows.append((u0, anchor[0] if anchor else u0, idx, km, a))
     return rows
 
 
 def _solve_rows(rows, layout, model, effects, data, max_steps):
     """One ``_solve_batch`` call on stacked rows; host arrays back."""
-    U0, IDX, KM, A = (np.stack(col) for col in zip(*rows))
+    U0, A0, IDX, KM, A = (np.stack(col) for col in zip(*rows))
     with jax.enable_x64(True):
-        u, chi2, jtj, ok, _ = _solve_batch(jnp.asarray(U0), jnp.asarray(IDX), jnp.asarray(KM), jnp.asarray(A),
+        u, chi2, jtj, ok, _ = _solve_batch(jnp.asarray(U0), jnp.asarray(A0), jnp.asarray(IDX), jnp.asarray(KM),
+                                           jnp.asarray(A),
                                            jnp.asarray(layout.prior_w), data, model=model, effects=effects,
                                            layout_key=layout.key, max_steps=max_steps)
         return tuple(np.asarray(x) for x in (u, chi2, jtj, ok))
@@ -223,7 +229,7 @@ def _fit_batch(jobs, layout, model, effects, data, k_pad, b_pad, max_steps, chun
         pad = part + [part[0]] * (width - len(part)) if len(part) < width else part
         u, chi2, jtj, ok = _solve_rows(pad, layout, model, effects, data, max_steps)
         for i in range(len(part)):
-            out.append((u[i], float(chi2[i]), jtj[i], bool(ok[i]), part[i][1], part[i][2]))
+            out.append((u[i], float(chi2[i]), jtj[i], bool(ok[i]), part[i][2], part[i][3], part[i][1]))
     return out
 
 
@@ -367,6 +373,22 @@ def discover(
     k_pad = len(base) + max([len(e.params) for e in testable] + [0]) + 4
     rng = np.random.default_rng(seed)
 
+    def refine(r, active=()):
+        """Continue a fit that stopped at the step cap from where it stopped, up to ``_REFINE_ROUNDS`` times.
+
+        Curved valleys (γ against ρd, ρs and α; a second lobe against the
+        first) can take Levenberg–Marquardt more than ``lm_steps`` steps; a
+        fit whose parameters are reported, or whose Δχ² decides, must have
+        converged. The priors stay centred on the first start.
+        """
+        for _ in range(_REFINE_ROUNDS):
+            u, chi2, _, ok, idx, km, anchor = r
+            if ok or not np.isfinite(chi2):
+                break
+            job = (u, [int(j) for j in idx[km]], tuple(active), anchor)
+            r = _fit_batch([job], layout, model, testable, data_dev, k_pad, 1, lm_steps, 1, True)[0]
+        return r
+
     # jobs: baseline multi-start over the model's own starting values
     u_init = layout.u_initial()
     base_free = layout.slices["model"]
@@ -383,10 +405,10 @@ def discover(
     n_cand_jobs = sum(len(e.starts()) for e in testable)
     b_pad = max(len(jobs), n_cand_jobs, 1)
     res = _fit_batch(jobs, layout, model, testable, data_dev, k_pad, b_pad, lm_steps, chunk, solo)
-    best = min(res, key=lambda t: t[1] if np.isfinite(t[1]) else np.inf)
+    best = refine(min(res, key=lambda t: t[1] if np.isfinite(t[1]) else np.inf))
 
     def state_of(r, active):
-        u, chi2, jtj, ok, idx, km = r
+        u, chi2, jtj, ok, idx, km, _ = r
         n_par = int(km.sum()) + n_prof + sum(testable[i].n_data_params for i in active)
         dof = max(n_obs - n_par, 1)
         cov = _cov_full(layout, jtj, idx, km)
@@ -441,33 +463,50 @@ def discover(
         structure_p_of = {}  # binned test per covariate: the residuals and covariates are fixed within a step
         res = _fit_batch(cand_jobs, layout, model, testable, data_dev, k_pad, b_pad, lm_steps, chunk, solo)
         m = len(remaining)
-        cands: list[Candidate] = []
-        by_effect: dict[int, FitState] = {}
-        for i in remaining:
+
+        def score(i, rs):
+            """The candidate of effect ``i`` from its fits ``rs`` (best physical start), and that fit."""
             e = testable[i]
-            rs = [r for r, o in zip(res, owner) if o == i and np.isfinite(r[1])]
             sts = [state_of(r, cur.active + (i,)) for r in rs]
-            phys = [s for s in sts if e.physical(s.values[e.name])]
-            chosen = min(phys, key=lambda s: s.chi2) if phys else (min(sts, key=lambda s: s.chi2) if sts else None)
+            phys = [k for k, st in enumerate(sts) if e.physical(st.values[e.name])]
+            pool = phys or range(len(sts))
+            k = min(pool, key=lambda k: sts[k].chi2) if sts else None
             cov_name = e.covariate
             sp = math.nan
             if cov_name in covs_cur:
                 if cov_name not in structure_p_of:
                     structure_p_of[cov_name] = _binned_test(r_flat, _flat(covs_cur[cov_name], mask))[2]
                 sp = structure_p_of[cov_name]
-            if chosen is None:
-                cands.append(Candidate(e.name, e.k, math.nan, -math.inf, 1.0, 0.0, sp, False, None, math.nan))
-                continue
-            dchi2 = cur.chi2 - chosen.chi2 if phys else 0.0
-            dchi2 = max(dchi2, 0.0)
+            if k is None:
+                return Candidate(e.name, e.k, math.nan, -math.inf, 1.0, 0.0, sp, False, None, math.nan), None
+            chosen = sts[k]
+            dchi2 = max(cur.chi2 - chosen.chi2 if phys else 0.0, 0.0)
             excess = max(cur.chi2 - cur.dof, dchi2, 1e-300)
-            c = Candidate(
+            return Candidate(
                 effect=e.name, k=e.k, delta_chi2=dchi2, delta_bic=dchi2 - e.k * ln_n, p_value=_lr_p(dchi2, e),
                 explained=dchi2 / excess, structure_p=sp, physical=bool(phys), state=chosen,
                 gap_p_after=_gap_p(chosen.chi2, chosen.dof) if phys else _gap_p(cur.chi2, cur.dof),
-            )
-            cands.append(c)
-            by_effect[i] = chosen
+            ), k
+
+        fits = {i: [r for r, o in zip(res, owner) if o == i and np.isfinite(r[1])] for i in remaining}
+        scored = {i: score(i, fits[i]) for i in remaining}
+        # Fits stopped at the step cap are continued where they decide or are reported: the
+        # winner, and runners-up whose ΔBIC (a lower bound then) already reaches half the winner's.
+        refined: set[int] = set()
+        while True:
+            top = max(scored[i][0].delta_bic for i in remaining)
+            todo = [i for i in remaining if i not in refined and scored[i][1] is not None
+                    and not scored[i][0].state.ok
+                    and (scored[i][0].delta_bic == top or scored[i][0].delta_bic >= _REFINE_BIC * top > 0)]
+            if not todo:
+                break
+            for i in todo:
+                k = scored[i][1]
+                fits[i][k] = refine(fits[i][k], cur.active + (i,))
+                scored[i] = score(i, fits[i])
+                refined.add(i)
+        cands = [scored[i][0] for i in remaining]
+        by_effect = {i: scored[i][0].state for i in remaining if scored[i][1] is not None}
         cands.sort(key=lambda c: -c.delta_bic)
         win = cands[0]
         justified = win.delta_bic > 0 and win.p_value * m < alpha

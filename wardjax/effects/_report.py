@@ -60,6 +60,10 @@ class Candidate:
     gap_p_after
         ``P(χ²_dof ≥ χ²)`` of the model with the effect: small when a
         significant gap remains (a partial match if it also explains little).
+    converged
+        Its fit converged. ``False`` when Levenberg–Marquardt stopped at its
+        step cap: Δχ² and ΔBIC are then lower bounds. ``discover`` continues
+        such a fit when it would win or reaches half the winner's ΔBIC.
     """
 
     effect: str
@@ -73,10 +77,14 @@ class Candidate:
     state: FitState | None = None
     gap_p_after: float = math.nan
 
+    @property
+    def converged(self) -> bool:
+        return self.state is None or bool(self.state.ok)
+
     def as_dict(self) -> dict:
         return {k: _num(getattr(self, k)) for k in
                 ("effect", "k", "delta_chi2", "delta_bic", "p_value", "explained", "structure_p", "physical",
-                 "gap_p_after")}
+                 "gap_p_after", "converged")}
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -228,8 +236,12 @@ class DiscoveryReport:
                      f"gap {s.gap_before:.3f} → {s.gap_after:.3f}.\n")
             L.append("| candidate | k | Δχ² | ΔBIC | LR p | structure p |\n|---|---|---|---|---|---|")
             for c in s.candidates:
-                L.append(f"| {c.effect} | {c.k} | {c.delta_chi2:.1f} | {c.delta_bic:.1f} | {c.p_value:.2g} | "
+                ge = "" if c.converged else "≥ "
+                L.append(f"| {c.effect} | {c.k} | {ge}{c.delta_chi2:.1f} | {ge}{c.delta_bic:.1f} | {c.p_value:.2g} | "
                          f"{c.structure_p:.2g} |")
+            if not all(c.converged for c in s.candidates):
+                L.append("\n≥: the fit stopped at the Levenberg–Marquardt step cap (`lm_steps`); Δχ² and ΔBIC are "
+                         "lower bounds, below half the winner's ΔBIC, so the fit was not continued.")
             if s.effect in figures:
                 L.append(f"\n![residuals against {s.plot['covariate'] if s.plot else ''}]({figures[s.effect]})\n")
         L.append("\n## Unexplained structure\n")
