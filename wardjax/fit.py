@@ -540,6 +540,32 @@ def _joint_rho_d(log_rs, theta, a: _JointArgs, iso: bool):
     return a_lin, b
 
 
+_joint_rho_d_jit = jax.jit(_joint_rho_d, static_argnames="iso")
+
+
+@jax.jit
+def _joint_prepare(f, wi, wo, w, n_samples, norm_index):
+    """Geometry of the joint fit's padded data, and the moments of its log-α grid start.
+
+    Returns the :class:`_JointArgs` (invalid geometry weighted 0) and
+    :func:`_moments_chunk` of the same data, sample axis last, for the
+    normalisation ``NORMALIZATIONS[norm_index]`` (traced: a capture's fit and
+    its export refit in another normalisation share the program). One
+    program: run eagerly, these few dozen small operations would each compile
+    once per shape bucket.
+    """
+    geoms = [ward_geometry(wi, wo, n) for n in NORMALIZATIONS]  # u, v, valid are common; only g differs
+    g = jnp.select([norm_index == i for i in range(len(geoms))], [geom.g for geom in geoms])
+    geom = geoms[0]
+    args = _JointArgs(f, geom.u, geom.v, g, jnp.where(geom.valid[..., None], w, 0.0))
+    # Start: the best of a log-α grid of the joint profiled χ² (for fixed α the
+    # joint model is linear in every ρd and the shared ρs), not the per-scanline
+    # fits, which a strong texture can spoil.
+    prepared = _moments_chunk(jnp.swapaxes(args.f, -1, -2), args.u, args.v, args.g, jnp.swapaxes(args.w, -1, -2),
+                              n_samples, iso=True)
+    return args, prepared
+
+
 def _joint_residual(y, a: _JointArgs, iso: bool):
     log_rs, theta = y[0], y[1:]
     a_lin, b = _joint_rho_d(log_rs, theta, a, iso)
@@ -574,14 +600,8 @@ def _combined(res: ScanlineFit, model: str, *, errors: str, max_steps: int, rtol
     sel = [np.asarray(a)[use] for a in (f_c, wi_c, wo_c, w_c)]
     f_p, wi_p, wo_p, w_p = (_pad(a, rows) for a in sel)
     wi_p[n_use:, :, 2] = wo_p[n_use:, :, 2] = 1.0  # padded rows: straight up, weight 0
-    geom = ward_geometry(jnp.asarray(wi_p), jnp.asarray(wo_p), res.normalization)
-    args = _JointArgs(jnp.asarray(f_p), geom.u, geom.v, geom.g,
-                      jnp.where(geom.valid[..., None], jnp.asarray(w_p), 0.0))
-    # Start: the best of a log-α grid of the joint profiled χ² (for fixed α the
-    # joint model is linear in every ρd and the shared ρs), not the per-scanline
-    # fits, which a strong texture can spoil.
-    prepared = _moments_chunk(jnp.swapaxes(args.f, -1, -2), args.u, args.v, args.g, jnp.swapaxes(args.w, -1, -2),
-                              jnp.asarray(n_true, jnp.int32), iso=True)  # the geometry above, sample axis last
+    args, prepared = _joint_prepare(f_p, wi_p, wo_p, w_p, np.int32(n_true),
+                                    np.int32(NORMALIZATIONS.index(res.normalization)))
     log_a, rs0 = (float(v) for v in _joint_grid_start(prepared))
     y = jnp.asarray([math.log(max(rs0, 1e-6))] + [log_a] * k, jnp.float64)
     n_obs = int(np.sum(np.broadcast_to(np.asarray(args.w), args.f.shape) > 0))
@@ -624,7 +644,7 @@ def _combined(res: ScanlineFit, model: str, *, errors: str, max_steps: int, rtol
     cov = cov_robust if used == "robust" else cov_model
     se = np.sqrt(np.clip(np.diag(cov), 0, None))
 
-    a_lin, _ = _joint_rho_d(jnp.asarray(y[0]), jnp.asarray(y[1:]), args, iso)
+    a_lin, _ = _joint_rho_d_jit(jnp.asarray(y[0]), jnp.asarray(y[1:]), args, iso)
     rho_d_s = np.pi * np.asarray(a_lin)[:n_use]
     rho_d = rho_d_s.mean(axis=0)
     # σ of the mean ρd: noise in each scanline's mean, plus (ρs, α) uncertainty

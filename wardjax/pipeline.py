@@ -479,7 +479,7 @@ def reconstruct_capture(cap, *, band_rows: int = 512, dtype=np.float32, clip_bou
         k = jnp.asarray(rig_constants(rig, cap.tangent), dtype)
         for r0 in range(0, h, hb):
             r1 = min(r0 + hb, h)
-            pm, sm = _masks_kernel(k, jnp.arange(r0, r0 + hb, dtype=dtype), **dims)
+            pm, sm = _masks_kernel(k, np.arange(r0, r0 + hb, dtype=dtype), **dims)
             probe[r0:r1], on_std[r0:r1] = np.asarray(pm)[: r1 - r0], np.asarray(sm)[: r1 - r0]
         pbox = _bbox(probe, 0)
         if pbox is None:
@@ -510,7 +510,7 @@ def reconstruct_capture(cap, *, band_rows: int = 512, dtype=np.float32, clip_bou
             r1 = min(r0 + step, rows_p.stop)
             n, m, sl = r1 - r0, cols.stop - cols.start, (slice(r0, r1), cols)
             dark = zeros if cap.dark is None else pad(cap.dark[sl], band)
-            out = _reconstruct_band(k, jnp.arange(r0, r0 + band[0], dtype=dtype), jnp.asarray(cols.start, dtype),
+            out = _reconstruct_band(k, np.arange(r0, r0 + band[0], dtype=dtype), jnp.asarray(cols.start, dtype),
                                     pad(cap.lit[sl], band), dark, pad(cap.lit_clipped[sl], band),
                                     std, std_size, offset, rho, nf, sat, **kw)
             for dst, src in zip((f_r, flags, wi, wo, points, f_clip), out):
