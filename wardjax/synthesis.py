@@ -398,10 +398,13 @@ def _rank_host(values, targets, picks, workers: int | None = None):
             tuple(jax.device_put(p) for p in picked))
 
 
-@functools.partial(jax.jit, static_argnames="picks")
+@jax.jit
 def _rank_xla(values, targets, picks):
-    """:func:`_rank_match` in XLA (``lax.sort`` of integer keys in the host keys' order: the same permutation)."""
-    picks = [np.asarray(p, np.int32) for p in picks]
+    """:func:`_rank_match` in XLA (``lax.sort`` of integer keys in the host keys' order: the same permutation).
+
+    ``picks`` are int32 arrays, traced: only their lengths are part of the
+    compiled program, not the 8,192 positions of a KS pick.
+    """
     if targets is None:
         return None, tuple(jnp.sort(v, axis=-1)[..., p] for v, p in zip(values, picks))
     matched, picked = [], []
@@ -438,8 +441,8 @@ def _rank_match(values, targets, picks, method: SortMethod = "auto"):
     matched, picked : tuples of jax.Array (``matched`` is ``None`` without targets)
     """
     if method == "xla" or (method == "auto" and jax.default_backend() != "cpu"):
-        static = tuple(tuple(int(i) for i in p) for p in picks)
-        return _rank_xla(tuple(values), None if targets is None else tuple(targets), static)
+        picks = tuple(jnp.asarray(np.asarray(p, np.int32)) for p in picks)
+        return _rank_xla(tuple(values), None if targets is None else tuple(targets), picks)
     return _rank_host(values, targets, picks)
 
 
