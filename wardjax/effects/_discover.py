@@ -386,7 +386,8 @@ def discover(
             if ok or not np.isfinite(chi2):
                 break
             job = (u, [int(j) for j in idx[km]], tuple(active), anchor)
-            r = _fit_batch([job], layout, model, testable, data_dev, k_pad, 1, lm_steps, 1, True)[0]
+            # the run's own batch width and mode: the compiled program is reused, not a new one for width 1
+            r = _fit_batch([job], layout, model, testable, data_dev, k_pad, b_pad, lm_steps, chunk, solo)[0]
         return r
 
     # jobs: baseline multi-start over the model's own starting values
