@@ -169,6 +169,21 @@ def _solve_batch(u0, a0, idx, kmask, active, prior_w, data, *, model, effects, l
     return jax.vmap(one)(u0, a0, idx, kmask, active)
 
 
+@functools.partial(jax.jit, static_argnames=("model", "effects", "layout_key"))
+def _residual_view(u, active, data, *, model, effects, layout_key):
+    """Whitened residuals (flat), prediction and censored mask of one fitted state, in one program.
+
+    Run eagerly, the model's few dozen operations would each compile on their
+    own (~76 small programs, ~3 s, per process and data shape).
+    """
+    names = tuple(e.name for e in effects)
+    vals = _unpack(layout_key, u, names)
+    act = {e.name: active[i] for i, e in enumerate(effects)}
+    r = model.residuals(vals, act, effects, data)
+    pred, _, cens = model.predict(vals, act, effects, data)
+    return r, pred, cens
+
+
 def _job_rows(jobs, layout, n_e, width):
     """Pad each job ``(u0, free indices, active effect indices[, prior centres])`` to ``width`` free slots.
 
@@ -421,16 +436,13 @@ def discover(
     found: list[str] = []
     steps: list[Step] = []
     partial: list[Candidate] = []
-    names_all = tuple(e.name for e in testable)
 
     def residual_view(st: FitState):
-        act = {e.name: (i in st.active) for i, e in enumerate(testable)}
+        act = np.array([i in st.active for i in range(len(testable))], bool)
         with jax.enable_x64(True):  # the parameters too: outside, jnp.asarray would round them to float32
-            vals = layout.unpack(jnp.asarray(st.u), names_all)
-            r = np.asarray(model.residuals(vals, act, testable, data_dev))
-            pred, _, cens = model.predict(vals, act, testable, data_dev)
-            pred = np.asarray(pred)
-        return r, pred, np.asarray(cens)
+            r, pred, cens = _residual_view(jnp.asarray(st.u), jnp.asarray(act), data_dev, model=model,
+                                           effects=testable, layout_key=layout.key)
+        return np.asarray(r), np.asarray(pred), np.asarray(cens)
 
     mask = np.asarray(data.mask) if hasattr(data, "mask") else None
     r_cur, pred_cur, _ = residual_view(cur)
