@@ -38,7 +38,6 @@ __all__ = [
     "periodic_smooth",
     "periodic_spectrum",
     "pyramid_build",
-    "pyramid_build_spectrum",
     "pyramid_collapse",
     "pyramid_subbands",
     "pyramid_masks",
@@ -155,23 +154,19 @@ def pyramid_build(
     ``Z_{l+1} = crop(Z_l) lo_l``; the low-pass residual is ``IDFT(Z_height)``.
     ``masks`` must be :func:`pyramid_masks` for ``shapes`` in ``x``'s dtype.
     """
-    return pyramid_build_spectrum(jnp.fft.rfft2(x, norm="forward"), masks, shapes)
-
-
-def pyramid_build_spectrum(spec, masks: dict, shapes: tuple[tuple[int, int], ...]):
-    """:func:`pyramid_build` from ``X = rfft2(x, norm="forward")`` (``(C, H, W//2+1)``) instead of ``x``."""
-    flat = pyramid_subbands(spec, masks, shapes)
-    bands = tuple(jnp.stack(flat[1 + 4 * lv : 5 + 4 * lv], axis=1) for lv in range(len(shapes) - 1))
+    flat = pyramid_subbands(jnp.fft.rfft2(x, norm="forward"), masks, shapes)
+    o = ORIENTATIONS
+    bands = tuple(jnp.stack(flat[1 + o * lv : 1 + o * (lv + 1)], axis=1) for lv in range(len(shapes) - 1))
     return flat[0], bands, flat[-1]
 
 
 def pyramid_subbands(spec, masks: dict, shapes: tuple[tuple[int, int], ...]) -> tuple[Float[Array, "c hl wl"], ...]:
-    """The subbands of :func:`pyramid_build_spectrum` as one flat tuple, each its own array.
+    """The subbands of :func:`pyramid_build` from ``X = rfft2(x, norm="forward")``, as one flat tuple.
 
-    Order: highpass, then level by level the 4 orientations, then lowpass
-    (``2 + 4 height`` arrays ``(C, H_l, W_l)``). Separate arrays spare the
-    copies that stacking the orientations (and slicing them apart again for
-    :func:`pyramid_collapse`) would cost.
+    Order: highpass, then level by level the ``ORIENTATIONS`` orientations,
+    then lowpass (``2 + ORIENTATIONS · height`` arrays ``(C, H_l, W_l)``).
+    Separate arrays spare the copies that stacking the orientations (and
+    slicing them apart again for :func:`pyramid_collapse`) would cost.
     """
     highpass = jnp.fft.irfft2(spec * masks["hi0"][None], s=shapes[0], norm="forward")
     z = spec * masks["lo0"][None]
@@ -209,7 +204,7 @@ def pyramid_collapse(subbands, masks: dict, shapes: tuple[tuple[int, int], ...])
     z = jnp.fft.rfft2(subbands[-1], norm="forward")
     for level in range(height - 1, -1, -1):
         band_spec = sum(
-            jnp.fft.rfft2(subbands[1 + 4 * level + b], norm="forward") * m[None]
+            jnp.fft.rfft2(subbands[1 + ORIENTATIONS * level + b], norm="forward") * m[None]
             for b, m in enumerate(masks["band"][level])
         )
         z = _pad(z * masks["lo"][level][None], shapes[level]) + (-1j) * band_spec
