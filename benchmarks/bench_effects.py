@@ -1,6 +1,6 @@
 """Missing-effect discovery: hidden-effect bench, real data, and a capture-sized timing.
 
-1. Hidden-effect bench (:mod:`wardjax.effects.bench`): each detectable library
+1. Hidden-effect bench (:mod:`benchmarks.hidden_effects`): each detectable library
    effect hidden at a random strength (RMS change 3–10 σ) in ``--draws``
    simulated cases (8 scanlines × 256 samples × RGB = 6,144 residuals), null
    data in ``--null`` cases, the out-of-library effect (orange peel) and the
@@ -23,8 +23,8 @@ import time
 
 import numpy as np
 
+from benchmarks import hidden_effects as eb
 from wardjax.effects import ScanlineModel, ThresholdModel, discover
-from wardjax.effects import bench as eb
 from wardjax.effects._real import curet_data, table1_threshold_data
 
 

@@ -100,7 +100,7 @@ def _pyr(image, height):
 
 
 def reference_analyze(rgb, height=HEIGHT, n_quantiles=N_QUANTILES):
-    from wardjax.synthesis import quantile_probabilities
+    from wardjax.texture import quantile_probabilities
 
     probs = quantile_probabilities(n_quantiles)
     pixels = rgb.reshape(-1, 3)
@@ -173,7 +173,7 @@ def main(size: int | None = None) -> None:
     import jax
 
     import wardjax as wj
-    from wardjax._procedural import procedural_texture
+    from wardjax.simulate import procedural_texture
 
     if size is None:
         size = int(sys.argv[1]) if len(sys.argv) > 1 and sys.argv[1].isdigit() else SIZE

@@ -361,11 +361,12 @@ def test_float32_cancellation_is_flagged_and_refit_in_float64():
     them in float64, so float32 ends with no collapsed fit."""
     from pathlib import Path
 
-    from wardjax import fit as F
+    from wardjax.fit import _data as F_data
+    from wardjax.fit import _scanline as F
 
     z = np.load(Path(__file__).parent / "data" / "float32" / "hard_scanlines.npz")
     w = 1.0 / z["sigma"] ** 2
-    data = F._validate(z["f_r"], z["wi"], z["wo"], None, w)
+    data = F_data.validate(z["f_r"], z["wi"], z["wo"], None, w)
     raw = F._solve(data, iso=True, normalization="ward1992", solver="fast", dtype=np.dtype(np.float32), chunk=1024)
     collapsed = np.abs(raw.alpha[:, 0] / z["alpha"] - 1) > 0.5
     assert collapsed.sum() >= 25  # the float32 kernel alone does fall into it here
@@ -382,7 +383,8 @@ def test_padded_samples_leave_the_prepared_scanline_unchanged(rng, n):
     # fit_scanlines pads the sample axis to _shapes.bucket(N) at zero weight and passes N as data, so that
     # captures of one rig share the compiled kernel; prepare must then gather the grid's subsample (every
     # max(1, ⌊N/64⌋)-th sample) exactly as it slices it unpadded.
-    from wardjax import _shapes, _varpro
+    from wardjax import _shapes
+    from wardjax.fit import _varpro
 
     pad = _shapes.bucket(n) + 3
     f, w = rng.uniform(0.1, 1.0, (3, pad)), rng.uniform(0.5, 2.0, (1, pad))

@@ -14,7 +14,7 @@ import jax
 import pytest
 
 import wardjax as wj
-from wardjax.batch import find_captures, run_batch
+from wardjax.run import find_captures, run_batch
 
 DESK = wj.WardParams(rho_d=(0.676,) * 3, rho_s=0.039, alpha_x=0.137, alpha_y=0.150)
 NAMES = ("a_desk", "b_desk")
@@ -81,7 +81,7 @@ def _killed_batch_reruns(captures, tmp_path):
     ref = tmp_path / "ref"
     run_batch([captures], ref)
     killed = tmp_path / "killed"
-    cmd = [sys.executable, "-c", "from wardjax.cli import main; main()", "fit", str(captures), "--out", str(killed),
+    cmd = [sys.executable, "-c", "from wardjax.run import main; main()", "fit", str(captures), "--out", str(killed),
            "--quiet"]
     proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     try:

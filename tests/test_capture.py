@@ -14,9 +14,10 @@ import pytest
 from click.testing import CliRunner
 
 import wardjax as wj
-from wardjax.capture import CaptureError, decode_values, encode_image, encode_values, load_capture, read_image
-from wardjax.capture_sim import SensorNoise, write_capture_toml
-from wardjax.cli import main
+from wardjax._files import decode_values, encode_image, encode_values, read_image
+from wardjax.capture import CaptureError, load_capture
+from wardjax.simulate import SensorNoise, write_capture_toml
+from wardjax.run import main
 
 PROBE = wj.WardParams(rho_d=(0.5, 0.45, 0.4), rho_s=0.04, alpha_x=0.12, alpha_y=0.12)
 

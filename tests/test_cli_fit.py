@@ -9,7 +9,7 @@ import numpy as np
 from click.testing import CliRunner
 
 import wardjax as wj
-from wardjax.cli import main
+from wardjax.run import main
 
 
 def test_simulate_writes_a_loadable_capture(tmp_path):
@@ -38,7 +38,7 @@ def test_fit_keeps_compiled_kernels_between_runs(tmp_path):
     outs = []
     for run in ("cold", "warm"):
         out = tmp_path / run
-        cmd = [sys.executable, "-m", "wardjax.cli", "--cache-dir", str(cache), "fit", str(cap), "--out", str(out)]
+        cmd = [sys.executable, "-m", "wardjax.run._cli", "--cache-dir", str(cache), "fit", str(cap), "--out", str(out)]
         res = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=600)
         assert res.returncode == 0, res.stderr
         if run == "cold":

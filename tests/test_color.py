@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 import wardjax as wj
-from wardjax import color
+from wardjax.smartphone import _color as color
 from wardjax._data import calibration_path
 
 

@@ -11,8 +11,8 @@ import imageio.v3 as iio
 import numpy as np
 import pytest
 
-from wardjax import color
-from wardjax._colorchecker import (
+from wardjax.smartphone import _color as color
+from wardjax.smartphone._colorchecker import (
     COLORCHECKER_NAMES,
     colorchecker_delta_E,
     colorchecker_patch_regions,
@@ -21,7 +21,7 @@ from wardjax._colorchecker import (
     fit_camera_correction,
     simulate_colorchecker_photo,
 )
-from wardjax._colorchecker import _XYZ_of_spectra
+from wardjax.smartphone._colorchecker import _XYZ_of_spectra
 
 DATA = Path(__file__).parent / "data" / "colorchecker"
 PAPER_MIN_MEAN_MAX = (1.6, 7.1, 18.8)   # its iPhone 5s photo, section 3.2

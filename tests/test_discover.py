@@ -8,8 +8,9 @@ import pytest
 from click.testing import CliRunner
 
 import wardjax as wj
-from wardjax.cli import main
-from wardjax.effects import ScanlineModel, ThresholdModel, bench, discover
+from wardjax.run import main
+from benchmarks import hidden_effects as bench
+from wardjax.effects import ScanlineModel, ThresholdModel, discover
 from wardjax.effects._real import curet_data, load_curet, table1_threshold_data
 
 FAST = ("gamma", "anisotropy", "coloured_specular")

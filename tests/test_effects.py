@@ -7,7 +7,8 @@ import numpy as np
 import pytest
 
 import wardjax as wj
-from wardjax.effects import LIBRARY, ScanlineModel, bench, get_effect, library, scanline_data
+from benchmarks import hidden_effects as bench
+from wardjax.effects import LIBRARY, ScanlineModel, get_effect, library, scanline_data
 
 
 @pytest.fixture(scope="module")
@@ -190,7 +191,7 @@ def test_capture_clipped_probe_pixels_are_censored_not_dropped(tmp_path):
     unclipped values are those of the reconstruction unchanged, and discovery names saturation and recovers α."""
     from wardjax.effects import discover
     from wardjax.effects._capture import capture_data
-    from wardjax.pipeline import MIN_SCANLINE_SAMPLES, reconstruct_capture
+    from wardjax.reconstruct import MIN_SCANLINE_SAMPLES, reconstruct_capture
 
     p = wj.WardParams(rho_d=(0.35, 0.4, 0.45), rho_s=0.02, alpha_x=0.06, alpha_y=0.06)
     cap = wj.simulate_capture(p, tmp_path / "clip", seed=5, image_size=(96, 72), texture="none", headroom=1.4)

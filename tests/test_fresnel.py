@@ -7,7 +7,7 @@ import pytest
 from scipy.integrate import quad
 
 import wardjax as wj
-from wardjax import fresnel
+from wardjax.smartphone import _fresnel as fresnel
 
 
 def _fresnel_textbook(theta, n, k=0.0):

@@ -14,7 +14,7 @@ import tifffile
 from click.testing import CliRunner
 
 import wardjax as wj
-from wardjax.cli import main
+from wardjax.run import main
 
 # The image-based paper's Table 1 (desk, marble), grey ρd.
 T1 = {"desk": wj.WardParams(rho_d=(0.676,) * 3, rho_s=0.039, alpha_x=0.137, alpha_y=0.150),
@@ -173,7 +173,7 @@ def test_marble_without_texture_is_unbiased(tmp_path):
 def test_texture_field_covariance_white_noise_is_model_covariance(rng):
     # Unit check: with white noise of σ and no texture, Σ_Δ ĉ(Δ) R(Δ) = σ² A⁻¹, the
     # Gauss–Newton covariance; A is the fit's own information matrix.
-    from wardjax.pipeline import texture_field_covariance
+    from wardjax.fit import texture_field_covariance
 
     truth = wj.WardParams(rho_d=(0.3, 0.3, 0.3), rho_s=0.02, alpha_x=0.06, alpha_y=0.08)
     rig = wj.ScanlineRig.from_angles(500.0, 30.0, 500.0, 30.0)
@@ -203,7 +203,8 @@ def test_fused_reconstruction_equals_the_numpy_reference(tmp_path, dtype):
     # program per band; the NumPy references (pixel_geometry, sample_bilinear, reconstruct_brdf)
     # give the same values and masks. Over-exposed, so that clipped pixels are masked too.
     from wardjax.geometry import pixel_geometry, to_material_frame
-    from wardjax.pipeline import _smooth_on, reconstruct_capture
+    from wardjax.reconstruct import reconstruct_capture
+    from wardjax.reconstruct._band import _smooth_on
     from wardjax.reconstruct import reconstruct_brdf, sample_bilinear
 
     p = CASES["iso_marble_srgb8"][0]
@@ -241,7 +242,8 @@ def test_fused_reconstruction_equals_the_numpy_reference(tmp_path, dtype):
 def test_binning_censors_a_bin_holding_a_clipped_pixel():
     # _bin_scanlines (fit_capture's and diagnose's binning): a bin with a clipped pixel is censored, its value the
     # mean of its values and clip bounds (a lower bound on its true mean); otherwise the mean of at least b²/2 values.
-    from wardjax.pipeline import Reconstruction, _bin_scanlines
+    from wardjax.reconstruct import Reconstruction
+    from wardjax.reconstruct import bin_scanlines as _bin_scanlines
 
     nan = np.nan
     f = np.array([[1.0, 2.0, 5.0, nan, 1.0, nan, 3.0, nan],
@@ -266,7 +268,7 @@ def _two_captures_of_one_rig(tmp_path):
     """Two 96×72 captures of one rig, the probe and the standard moved a few pixels in the second."""
     import dataclasses
 
-    from wardjax.capture_sim import default_rig
+    from wardjax.simulate import default_rig
 
     p = CASES["iso_marble_srgb8"][0]
     base = default_rig((96, 72))
@@ -279,16 +281,18 @@ def test_captures_of_one_rig_share_one_compiled_reconstruction(tmp_path, monkeyp
     # reconstruct_capture pads the probe's band and the standard's crop to bucketed sizes (_shapes.bucket), so
     # two captures whose probe and standard sit a little differently compile _reconstruct_band once, not once
     # each (seconds per compile on a real image), and reconstruct what the unpadded kernel does.
-    from wardjax import _shapes, pipeline
+    from wardjax import _shapes
+    from wardjax.reconstruct import _band
+    from wardjax.run import _fit_capture
 
     caps = _two_captures_of_one_rig(tmp_path)
     bucket = _shapes.bucket
 
     def reconstruct(bucket_fn):
         monkeypatch.setattr(_shapes, "bucket", bucket_fn)
-        pipeline._reconstruct_band.clear_cache()
-        recs = [pipeline.reconstruct_capture(c, clip_bounds=True) for c in caps]
-        return recs, pipeline._reconstruct_band._cache_size()
+        _band._reconstruct_band.clear_cache()
+        recs = [_band.reconstruct_capture(c, clip_bounds=True) for c in caps]
+        return recs, _band._reconstruct_band._cache_size()
 
     exact, n_exact = reconstruct(lambda n: n)
     padded, n_padded = reconstruct(bucket)
@@ -352,7 +356,9 @@ def test_captures_of_one_rig_share_every_compiled_program_of_the_fit(tmp_path, m
     # ~60 programs, ~14 s at 96 × 72 on two cores) and fits what the unpadded programs fit.
     import jax
 
-    from wardjax import _shapes, pipeline
+    from wardjax import _shapes
+    from wardjax.reconstruct import _band
+    from wardjax.run import _fit_capture
 
     caps = _two_captures_of_one_rig(tmp_path)
     bucket = _shapes.bucket
@@ -360,9 +366,9 @@ def test_captures_of_one_rig_share_every_compiled_program_of_the_fit(tmp_path, m
     def fit(bucket_fn):
         monkeypatch.setattr(_shapes, "bucket", bucket_fn)
         jax.clear_caches()
-        first = pipeline.fit_capture(caps[0])
+        first = _fit_capture.fit_capture(caps[0])
         with _Compiles() as c:
-            second = pipeline.fit_capture(caps[1])
+            second = _fit_capture.fit_capture(caps[1])
         return (first, second), c.names
 
     exact, compiled_exact = fit(lambda n: n)

@@ -6,9 +6,9 @@ import pytest
 from click.testing import CliRunner
 
 import wardjax as wj
-from wardjax import psychophysics as ps
-from wardjax._alpha_posterior import _problem_arrays, _batched, _initial_walkers
-from wardjax.cli import main
+from wardjax import smartphone as ps
+from wardjax.smartphone._alpha_posterior import _problem_arrays, _batched, _initial_walkers
+from wardjax.run import main
 
 
 # ----------------------------------------------------------------------------- geometry

@@ -10,7 +10,7 @@ from click.testing import CliRunner
 
 import wardjax as wj
 from wardjax.capture import CaptureError, load_capture
-from wardjax.cli import main
+from wardjax.run import main
 
 
 def _write(folder, *, toml=None, photo=None, **edits):

@@ -18,9 +18,9 @@ import pytest
 from scipy.stats import ks_2samp
 
 import wardjax as wj
-from wardjax._procedural import procedural_texture
-from wardjax._pyramid import pyramid_masks, pyramid_shapes
-from wardjax.synthesis import quantile_probabilities
+from wardjax.simulate import procedural_texture
+from wardjax.texture._pyramid import pyramid_masks, pyramid_shapes
+from wardjax.texture import quantile_probabilities
 
 EPS64 = np.finfo(np.float64).eps
 EPS32 = np.finfo(np.float32).eps
@@ -139,7 +139,7 @@ def test_02_periodic_smooth_decomposition(rng):
 @pytest.mark.parametrize("shape", [(37, 50), (33, 17), (64, 64)])
 def test_02_periodic_spectrum_is_the_dft_of_the_periodic_part(rng, shape):
     """Analysis takes p's spectrum from two 1-D DFTs of the border jumps; it must equal rfft2 of the 2-D route."""
-    from wardjax._pyramid import periodic_spectrum
+    from wardjax.texture._pyramid import periodic_spectrum
 
     u = rng.standard_normal((2, *shape)).cumsum(axis=1).cumsum(axis=2)
     p = np.stack([wj.periodic_smooth_decomposition(x)[0] for x in u])
@@ -168,7 +168,7 @@ def test_03_histogram_matching_is_exact(rng):
 
 def test_03_rank_keys_agree_between_numpy_and_xla(rng):
     """Host (float64 keys) and XLA (integer keys) sorts give the same permutation, ties, ±0 and subnormals included."""
-    from wardjax.synthesis import _rank_match
+    from wardjax.texture._rank import _rank_match
 
     v = np.concatenate([np.repeat(rng.standard_normal(40), 5),  # ties among negative and positive values
                         [0.0, -0.0, 0.0, -0.0, 1e-45, -1e-45, 1e-40, -1e-40, 3e38, -3e38]]).astype(np.float32)
@@ -411,7 +411,7 @@ def test_06_limitation_regular_texture_is_lost(tmp_path):
         assert ks_2samp(d_src[c].ravel(), d_syn[c].ravel()).statistic < 0.02
     pair = np.concatenate([src, np.ones((SRC[0], 8, 3)), res.image[:, : SRC[1]]], axis=1)
     targets = [tmp_path] + ([Path(os.environ["WARDJAX_FIGURES"])] if os.environ.get("WARDJAX_FIGURES") else [])
-    from wardjax.synthesis import write_texture_image
+    from wardjax.texture import write_texture_image
 
     for folder in targets:
         assert write_texture_image(folder / "texture_limitation_bricks.png", pair).stat().st_size > 0
@@ -424,7 +424,7 @@ def test_07_cli_analyze_and_synthesize(tmp_path):
     import tifffile
     from click.testing import CliRunner
 
-    from wardjax.cli import main
+    from wardjax.run import main
 
     img = procedural_texture("marble", (80, 96), seed=2).astype(np.float32)
     img[:, :8] = np.nan
@@ -446,7 +446,7 @@ def test_07_cli_analyze_and_synthesize(tmp_path):
     srgb = iio.imread(tmp_path / "out.png")
     assert srgb.shape == (64, 96, 3) and srgb.dtype == np.uint8
     # The PNG is the sRGB encoding of the same linear values.
-    from wardjax.synthesis import srgb_encode
+    from wardjax._files import srgb8 as srgb_encode
 
     assert np.abs(srgb.astype(int) - srgb_encode(lin).astype(int)).max() <= 1
     r = runner.invoke(main, ["texture", "synthesize", str(tmp_path / "texture.json"), "--size", "96by64",

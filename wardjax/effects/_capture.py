@@ -99,7 +99,7 @@ def capture_data(cap: Capture, *, max_samples: int = 20_000, band_rows: int = 51
     band_rows
         Rows processed at a time.
     """
-    from ..pipeline import MIN_SCANLINE_SAMPLES, _bin_scanlines, reconstruct_capture
+    from ..reconstruct import MIN_SCANLINE_SAMPLES, bin_scanlines, reconstruct_capture
 
     if cap.method != "scanline":
         raise CaptureError(CAPTURE_FILE, "method", f"diagnose needs method = 'scanline', got {cap.method!r}")
@@ -107,7 +107,7 @@ def capture_data(cap: Capture, *, max_samples: int = 20_000, band_rows: int = 51
     rec = reconstruct_capture(cap, band_rows=band_rows, dtype=np.float64, clip_bounds=True)
     if not rec.probe.any():
         raise CaptureError(CAPTURE_FILE, "camera", "no pixel of the image sees the probe")
-    bins = _bin_scanlines(rec, max_samples)  # scanlines = image columns
+    bins = bin_scanlines(rec, max_samples)  # scanlines = image columns
     F, cens = bins.f_r, bins.censored
     keep = np.sum(np.all(np.isfinite(F) & ~cens, axis=-1), axis=1) >= MIN_SCANLINE_SAMPLES  # uncensored values
     if not keep.any():

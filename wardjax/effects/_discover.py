@@ -61,8 +61,8 @@ import time
 
 import jax
 import jax.numpy as jnp
-import numpy as np
 import lineax as lx
+import numpy as np
 import optimistix as optx
 from scipy import stats
 

@@ -14,7 +14,7 @@ Table 1 (smartphone paper, section 6, Fig. 8a)
 
 CUReT (Dana, van Ginneken, Nayar, Koenderink, ACM TOG 18(1), 1999)
     61 samples × 205 BRDF values averaged over RGB, with each measurement's
-    viewing and illumination directions (``tests/data/curet/``). The noise is
+    viewing and illumination directions (``calibration/curet/``, shipped with the package). The noise is
     not published; it is estimated per sample from the scatter between
     measurements whose direction pairs are nearest neighbours (a relative
     error, an upper bound since the BRDF also changes between neighbours).
@@ -26,16 +26,18 @@ from pathlib import Path
 
 import numpy as np
 
+from .._data import calibration_path
 from ._models import ScanlineData, ThresholdData, scanline_data, threshold_data
 
 __all__ = ["table1_threshold_data", "load_curet", "curet_data", "CURET_DIR"]
 
-CURET_DIR = Path(__file__).resolve().parents[2] / "tests" / "data" / "curet"
+CURET_DIR = calibration_path("curet")
 
 
 def table1_threshold_data() -> ThresholdData:
     """Table 1a/1b of the smartphone paper (gloss 95–30) as :class:`ThresholdData`."""
-    from .._alpha_model import GLOSS_ORDER, NCS_ORDER, PHYSICAL_GLOSS, load_table1, physical_lines
+    from ..smartphone import load_table1, physical_lines
+    from ..smartphone._alpha_model import GLOSS_ORDER, NCS_ORDER, PHYSICAL_GLOSS
 
     t = load_table1()
     cols = [GLOSS_ORDER.index(g) for g in PHYSICAL_GLOSS]
@@ -62,7 +64,7 @@ def load_curet(folder: str | Path | None = None) -> tuple[np.ndarray, np.ndarray
     d = Path(folder) if folder is not None else CURET_DIR
     for name in ("abrdf.dat", "table.txt"):
         if not (d / name).is_file():
-            raise FileNotFoundError(f"{d / name}: CUReT file missing (see tests/data/curet/README.md)")
+            raise FileNotFoundError(f"{d / name}: CUReT file missing (see calibration/curet/README.md)")
     a = np.loadtxt(d / "abrdf.dat")
     t = np.loadtxt(d / "table.txt")
     if a.ndim != 2 or a.shape[1] != 206 or t.shape != (205, 5):

@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..export import write_bytes_atomic
+from .._files import write_bytes_atomic
 
 __all__ = ["Candidate", "DiscoveryReport", "FitState", "Step"]
 
@@ -213,7 +213,7 @@ class DiscoveryReport:
     def to_markdown(self, figures: dict[str, str] | None = None) -> str:
         """A readable report; ``figures`` maps ``"gap"`` / effect names to image links."""
         figures = figures or {}
-        L = [f"# Missing-effect discovery\n", f"**Model:** {self.model} — {self.n_obs} observations "
+        L = ["# Missing-effect discovery\n", f"**Model:** {self.model} — {self.n_obs} observations "
              f"({self.n_profiled} profiled ρd).\n", f"**Verdict:** {self.verdict()}.\n"]
         L.append("## Gap per step\n")
         L.append("| step | model | gap (χ²/dof) |\n|---|---|---|")

@@ -1,0 +1,53 @@
+"""The one error a capture raises: the file, the field, what is wrong."""
+
+from __future__ import annotations
+
+import pydantic
+
+__all__ = ["CAPTURE_FILE", "CaptureError", "pydantic_error"]
+
+CAPTURE_FILE = "capture.toml"
+
+
+class CaptureError(ValueError):
+    """A capture that cannot be used: one line naming the file and the field or value.
+
+    Attributes
+    ----------
+    file
+        The file at fault (``capture.toml`` or an image), relative to the capture folder.
+    field
+        The field (``camera.focal_px``) or ``None``.
+    """
+
+    def __init__(self, file: str, field: str | None, message: str):
+        self.file = file
+        self.field = field
+        self.message = message
+        where = f"{file}: {field}: " if field else f"{file}: "
+        super().__init__(where + message)
+
+
+def _fmt_loc(loc) -> str:
+    out = ""
+    for part in loc:
+        if isinstance(part, int):
+            out += f"[{part}]"
+        else:
+            out += ("." if out else "") + str(part)
+    return out or "(top level)"
+
+
+def pydantic_error(err: pydantic.ValidationError, file: str) -> CaptureError:
+    first = err.errors()[0]
+    loc = [p for p in first["loc"] if not (isinstance(p, str) and ("[" in p or "-" in p))]
+    field = _fmt_loc(loc)
+    msg = first["msg"]
+    if first["type"] == "missing":
+        return CaptureError(file, field, "required field is missing")
+    if first["type"] == "extra_forbidden":
+        return CaptureError(file, field, "unknown field (check its spelling and section)")
+    got = first.get("input")
+    more = len(err.errors()) - 1
+    tail = f" (and {more} more problem{'s' if more > 1 else ''})" if more else ""
+    return CaptureError(file, field, f"{msg}, got {got!r}{tail}")

@@ -1,0 +1,150 @@
+"""Loading a capture folder: the validated file, the images decoded to linear light."""
+
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+
+import numpy as np
+
+from .._files import RAW_SUFFIXES, decode_lut, read_image, sha256
+from ..geometry import Camera, Rig
+from ._errors import CAPTURE_FILE, CaptureError
+from ._schema import CaptureFile, parse_capture_file
+from ._smartphone import load_smartphone_capture
+
+__all__ = ["IMAGE_SUFFIXES", "Capture", "load_capture"]
+
+IMAGE_SUFFIXES = (".png", ".tif", ".tiff", ".jpg", ".jpeg") + RAW_SUFFIXES
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class Capture:
+    """A loaded, validated capture.
+
+    Attributes
+    ----------
+    path
+        The capture folder.
+    name
+        ``name`` from the file, or the folder name.
+    config
+        The validated :class:`CaptureFile`.
+    rig
+        The :class:`~wardjax.geometry.Rig` (camera, lamp, regions).
+    lit, dark
+        ``(H, W, 3)`` float32 linear images (full scale 1); ``dark`` may be ``None``.
+    lit_clipped
+        ``(H, W, 3)`` bool: the lit value is the largest code (clipped).
+    saturation
+        Linear level from which a value counts as clipped.
+    checksums
+        ``{file name: "sha256:…"}`` of ``capture.toml`` and every image read.
+    """
+
+    path: Path
+    name: str
+    config: CaptureFile
+    rig: Rig
+    lit: np.ndarray
+    dark: np.ndarray | None
+    lit_clipped: np.ndarray
+    saturation: float
+    checksums: dict[str, str]
+
+    @property
+    def method(self) -> str:
+        return self.config.method
+
+    @property
+    def tangent(self) -> tuple[float, float]:
+        t = np.asarray(self.config.material.tangent, float)
+        t = t / np.linalg.norm(t)
+        return (float(t[0]), float(t[1]))
+
+    @property
+    def rho_standard(self) -> np.ndarray:
+        return np.asarray(self.config.rho_standard, float)
+
+
+def _load_image(folder: Path, name: str, field: str, cfg: CaptureFile):
+    path = folder / name
+    if Path(name).is_absolute() or ".." in Path(name).parts:
+        raise CaptureError(CAPTURE_FILE, field, f"image path {name!r} must be relative to the capture folder")
+    if not path.is_file():
+        raise CaptureError(name, None, f"image file is missing (named by {CAPTURE_FILE} {field})")
+    suffix = path.suffix.lower()
+    if suffix not in IMAGE_SUFFIXES:
+        raise CaptureError(CAPTURE_FILE, field, f"unsupported image type {suffix!r}; expected one of {', '.join(IMAGE_SUFFIXES)}")
+    enc, bits = cfg.images.encoding, cfg.images.bit_depth
+    if suffix in RAW_SUFFIXES and (enc != "linear" or bits != 16):
+        raise CaptureError(CAPTURE_FILE, "images.encoding", f"raw file {name} is decoded linear 16-bit; "
+                           f"set encoding = \"linear\" and bit_depth = 16 (got {enc!r}, {bits})")
+    if suffix in (".jpg", ".jpeg") and bits != 8:
+        raise CaptureError(CAPTURE_FILE, "images.bit_depth", f"JPEG {name} is 8-bit, got bit_depth = {bits}")
+    try:
+        codes = read_image(path)
+    except Exception as e:  # any reader failure is a corrupt file to the user
+        reason = str(e).splitlines()[0] if str(e) else type(e).__name__
+        raise CaptureError(name, None, f"cannot read the image ({reason[:160]})") from None
+    want = np.uint8 if bits == 8 else np.uint16
+    if codes.dtype != want:
+        raise CaptureError(name, None, f"holds {codes.dtype} values but {CAPTURE_FILE} images.bit_depth = {bits} "
+                           f"(expected {np.dtype(want).name})")
+    w, h = cfg.camera.image_size
+    if codes.shape[:2] != (h, w):
+        raise CaptureError(name, None, f"is {codes.shape[1]}×{codes.shape[0]} pixels but {CAPTURE_FILE} "
+                           f"camera.image_size = [{w}, {h}]")
+    return codes, sha256(path)
+
+
+def load_capture(path) -> Capture:
+    """Load and validate a capture folder.
+
+    Parameters
+    ----------
+    path
+        The folder holding ``capture.toml`` and its images.
+
+    Returns
+    -------
+    Capture
+
+    Raises
+    ------
+    CaptureError
+        One line naming the file and the field or value at fault.
+    """
+    folder = Path(path)
+    if not folder.is_dir():
+        raise CaptureError(str(folder), None, "not a folder (a capture is a folder with capture.toml and images)")
+    cfg = parse_capture_file(folder / CAPTURE_FILE)
+    if cfg.method == "smartphone":
+        return load_smartphone_capture(folder, cfg)
+    checksums = {CAPTURE_FILE: sha256(folder / CAPTURE_FILE)}
+    lit_codes, checksums[cfg.images.lit] = _load_image(folder, cfg.images.lit, "images.lit", cfg)
+    enc, bits = cfg.images.encoding, cfg.images.bit_depth
+    top = (1 << bits) - 1
+    lut = decode_lut(enc, bits)
+    lit = lut[lit_codes]
+    clipped = lit_codes == top
+    del lit_codes
+    dark = None
+    if cfg.images.dark is not None:
+        dark_codes, checksums[cfg.images.dark] = _load_image(folder, cfg.images.dark, "images.dark", cfg)
+        dark = lut[dark_codes]
+        del dark_codes
+    if clipped.all():
+        raise CaptureError(cfg.images.lit, None, "every pixel is saturated (at the largest code); reduce the exposure")
+    saturation = float(0.5 * (lut[top] + lut[top - 1]))
+    cam = Camera(
+        position=cfg.rig.camera,
+        look_at=cfg.camera.look_at,
+        focal_px=(cfg.camera.focal_px, cfg.camera.focal_px_y or cfg.camera.focal_px),
+        image_size=cfg.camera.image_size,
+        principal_point=cfg.camera.principal_point,
+        up=cfg.camera.up,
+    )
+    rig = Rig(lamp=cfg.rig.lamp, camera=cam, probe=cfg.regions.probe, standard=cfg.regions.standard)
+    name = cfg.name or folder.resolve().name
+    return Capture(folder, name, cfg, rig, lit, dark, clipped, saturation, checksums)

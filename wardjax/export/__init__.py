@@ -1,0 +1,16 @@
+"""Materials out: the one ``params.json`` builder, Radiance materials, a capture's output folder."""
+
+from ._outputs import OUTPUT_FILES as OUTPUT_FILES
+from ._outputs import scanline_figure_png as scanline_figure_png
+from ._outputs import write_capture_outputs as write_capture_outputs
+from ._outputs import write_smartphone_outputs as write_smartphone_outputs
+from ._params import PARAMS_SCHEMA as PARAMS_SCHEMA
+from ._params import capture_fit_document as capture_fit_document
+from ._params import params_document as params_document
+from ._params import smartphone_document as smartphone_document
+from ._params import software_version as software_version
+from ._radiance import RADIANCE_NORMALIZATION as RADIANCE_NORMALIZATION
+from ._radiance import RADIANCE_PRIMARIES as RADIANCE_PRIMARIES
+from ._radiance import radiance_material as radiance_material
+from ._radiance import radiance_metal as radiance_metal
+from ._radiance import radiance_rgb as radiance_rgb

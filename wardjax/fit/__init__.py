@@ -1,0 +1,8 @@
+"""Fitting Ward to scanlines: per-scanline fits, the joint refit, texture-field errors."""
+
+from ._joint import CombinedFit as CombinedFit
+from ._scanline import ScanlineFit as ScanlineFit
+from ._scanline import fit_scanlines as fit_scanlines
+from ._texture_field import TextureErrors as TextureErrors
+from ._texture_field import texture_field_covariance as texture_field_covariance
+from ._texture_field import with_texture_errors as with_texture_errors

@@ -1,0 +1,10 @@
+"""Measured pixel values → BRDF values: the compiled band kernel, binning, the NumPy reference."""
+
+from ._band import Reconstruction as Reconstruction
+from ._band import reconstruct_capture as reconstruct_capture
+from ._bins import MIN_SCANLINE_SAMPLES as MIN_SCANLINE_SAMPLES
+from ._bins import ScanlineBins as ScanlineBins
+from ._bins import bin_scanlines as bin_scanlines
+from ._reference import MaskReason as MaskReason
+from ._reference import reconstruct_brdf as reconstruct_brdf
+from ._reference import sample_bilinear as sample_bilinear

@@ -1,0 +1,111 @@
+"""Binning a reconstruction for the fit: ``b × b`` bins, image columns as scanlines."""
+
+from __future__ import annotations
+
+import math
+from typing import NamedTuple
+
+import numpy as np
+
+from ._band import Reconstruction
+
+__all__ = ["MIN_SCANLINE_SAMPLES", "ScanlineBins", "bin_scanlines"]
+
+# A scanline (image column) with fewer usable bins than this is not fitted.
+MIN_SCANLINE_SAMPLES = 8
+
+
+def _block_sum(a: np.ndarray, b: int) -> np.ndarray:
+    h, w = a.shape[:2]
+    return a.reshape(h // b, b, w // b, b, *a.shape[2:]).sum(axis=(1, 3))
+
+
+def _pad_to(a: np.ndarray, b: int, fill) -> np.ndarray:
+    h, w = a.shape[:2]
+    ph, pw = (-h) % b, (-w) % b
+    if ph == 0 and pw == 0:
+        return a
+    pad = [(0, ph), (0, pw)] + [(0, 0)] * (a.ndim - 2)
+    return np.pad(a, pad, constant_values=fill)
+
+
+class ScanlineBins(NamedTuple):
+    """What :func:`bin_scanlines` returns: the probe binned ``b × b``, image columns as scanlines.
+
+    Attributes
+    ----------
+    f_r
+        ``(S, N, 3)`` float64 bin means of ``f_r``; NaN where fewer than half
+        of the bin's pixels carry a value. Where :attr:`censored`, a lower
+        bound (see :func:`bin_scanlines`).
+    censored
+        ``(S, N, 3)`` bool: the bin holds a clipped pixel; its value bounds the true mean from below.
+    wi, wo
+        ``(S, N, 3)`` unit bin-mean directions (material frame); ``(0, 0, 1)`` off the probe.
+    points
+        ``(S, N, 3)`` bin-mean sample-plane positions (mm) of the probe pixels.
+    b
+        The bin size (pixels).
+    box
+        Row and column slices of the probe's bounding box in the image.
+    """
+
+    f_r: np.ndarray
+    censored: np.ndarray
+    wi: np.ndarray
+    wo: np.ndarray
+    points: np.ndarray
+    b: int
+    box: tuple[slice, slice]
+
+
+def bin_scanlines(rec: Reconstruction, max_samples: int) -> ScanlineBins:
+    r"""Bin a reconstruction's probe ``b × b`` (at most ``max_samples`` bins), image columns as scanlines.
+
+    ``b = ⌈√(n_probe / max_samples)⌉``; the probe's bounding box is padded to
+    a multiple of ``b``. Per bin and channel, with ``E`` its exact values
+    (finite ``f_r``) and ``C`` its clip bounds (finite ``f_clip``, when the
+    reconstruction has them):
+
+    * no clipped pixel: the mean of ``E`` if ``|E| ≥ b²/2``, else NaN;
+    * a clipped pixel (``|C| ≥ 1``, ``|E| + |C| ≥ b²/2``): *censored*, the
+      value ``(Σ_E f + Σ_C f_clip)/(|E| + |C|)``. Each ``f_clip`` bounds its
+      pixel's true value from below, so this bounds the bin's true mean from
+      below: a bin of mixed clipped and unclipped pixels is censored, never
+      the mean of its unclipped pixels alone (that would drop the brightest).
+
+    Directions and positions are the means over the bin's probe pixels, the
+    directions renormalised.
+    """
+    probe = rec.probe
+    n_probe = int(probe.sum())
+    rows = np.flatnonzero(probe.any(axis=1))
+    colz = np.flatnonzero(probe.any(axis=0))
+    box = (slice(rows[0], rows[-1] + 1), slice(colz[0], colz[-1] + 1))
+    b = max(1, math.ceil(math.sqrt(n_probe / max_samples)))
+    half = max(1.0, b * b / 2)
+
+    def total(a, fill):  # block sums over the b × b bins of the (cropped) bounding box, float64
+        return _block_sum(_pad_to(a, b, fill).astype(np.float64), b)
+
+    fc = rec.f_r[box]
+    fin = np.isfinite(fc)
+    n_f = total(fin, False)
+    s_f = total(np.where(fin, fc, 0.0), 0.0)
+    f_bin = np.where(n_f >= half, s_f / np.maximum(n_f, 1), np.nan)
+    cens = np.zeros(f_bin.shape, bool)
+    if rec.f_clip is not None:
+        cc = rec.f_clip[box]
+        cin = np.isfinite(cc)
+        n_c = total(cin, False)
+        cens = (n_c > 0) & (n_f + n_c >= half)
+        f_bin = np.where(cens, (s_f + total(np.where(cin, cc, 0.0), 0.0)) / np.maximum(n_f + n_c, 1), f_bin)
+    n_p = np.maximum(total(probe[box], False), 1)[..., None]
+    wi_bin, wo_bin = total(rec.wi[box], 0.0) / n_p, total(rec.wo[box], 0.0) / n_p
+    for d in (wi_bin, wo_bin):
+        nrm = np.linalg.norm(d, axis=-1, keepdims=True)
+        d /= np.where(nrm > 0, nrm, 1.0)
+        d[nrm[..., 0] == 0] = (0.0, 0.0, 1.0)
+    p_bin = total(np.nan_to_num(rec.points[box]), 0.0) / n_p
+    scan = lambda a: np.ascontiguousarray(a.transpose(1, 0, 2))  # noqa: E731
+    return ScanlineBins(scan(f_bin), scan(cens), scan(wi_bin), scan(wo_bin), scan(p_bin), b, box)

@@ -1,0 +1,226 @@
+"""Folders of captures: fit each, write its outputs, keep a ``summary.csv``; survive bad input and kills.
+
+:func:`run_batch` takes capture folders and folders of capture folders. For
+each capture it loads, fits and writes ``OUT/<name>/`` (see
+:func:`wardjax.export.write_capture_outputs`). A capture that fails is
+recorded in ``summary.csv`` with its one-line error and the batch goes on.
+
+Restartable: every file is written atomically and ``params.json`` is written
+last, so a capture is finished exactly when its ``params.json`` exists and
+records the checksums of the current inputs. A rerun skips finished captures
+(unless ``force``), removes temporary files a killed run left behind and
+redoes the rest; its outputs are identical to those of an uninterrupted run,
+the ``created`` timestamp aside. ``summary.csv`` is rebuilt from the
+``params.json`` files, so it does not depend on which run made them.
+"""
+
+from __future__ import annotations
+
+import csv
+import dataclasses
+import datetime
+import io
+import json
+from collections.abc import Callable
+from pathlib import Path
+
+from .._files import sha256, write_bytes_atomic
+from ..capture import CAPTURE_FILE, CaptureError, load_capture
+from ..export import write_capture_outputs
+
+__all__ = ["BatchItem", "find_captures", "run_batch", "SUMMARY_COLUMNS"]
+
+SUMMARY_COLUMNS = (
+    "capture", "status", "method", "model", "normalization",
+    "rho_d_r", "rho_d_g", "rho_d_b", "rho_s", "alpha_x", "alpha_y",
+    "rho_d_r_err", "rho_d_g_err", "rho_d_b_err", "rho_s_err", "alpha_x_err", "alpha_y_err",
+    "fit_status", "reduced_chi2", "valid_pixels", "error", "source",
+)
+
+# Fitters by capture method. The smartphone method registers its function here
+# when it lands (see the hook in wardjax.capture.parse_capture_file).
+FITTERS: dict[str, Callable] = {}
+
+
+def _fit_scanline(cap, out_dir: Path, created: str) -> dict:
+    from ._fit_capture import fit_capture
+
+    return write_capture_outputs(fit_capture(cap), out_dir, created=created)
+
+
+FITTERS["scanline"] = _fit_scanline
+
+
+def _fit_smartphone(cap, out_dir: Path, created: str) -> dict:
+    from ._smartphone import fit_smartphone_capture
+
+    return fit_smartphone_capture(cap, out_dir, created=created)
+
+
+FITTERS["smartphone"] = _fit_smartphone
+
+
+@dataclasses.dataclass(frozen=True)
+class BatchItem:
+    """One capture of a batch: its folder, output name, and the outcome."""
+
+    source: Path
+    name: str
+    status: str  # "ok" | "error"
+    error: str = ""
+    skipped: bool = False
+    params: dict | None = None
+
+
+def find_captures(paths) -> list[Path]:
+    """Capture folders among ``paths``.
+
+    A path holding ``capture.toml`` is a capture. A folder without one is a
+    folder of captures if it has subfolders (each non-hidden subfolder is a
+    capture, broken or not), else it is itself a (broken) capture. Order:
+    as given, subfolders sorted by name.
+    """
+    found: list[Path] = []
+    for p in map(Path, paths):
+        if (p / CAPTURE_FILE).is_file() or not p.is_dir():
+            found.append(p)
+            continue
+        subs = sorted(d for d in p.iterdir() if d.is_dir() and not d.name.startswith("."))
+        found.extend(subs if subs else [p])
+    return found
+
+
+def _names(captures: list[Path]) -> list[str]:
+    names, seen = [], {}
+    for c in captures:
+        base = c.resolve().name or "capture"
+        k = seen.get(base, 0) + 1
+        seen[base] = k
+        names.append(base if k == 1 else f"{base}-{k}")
+    return names
+
+
+def _finished(source: Path, out_dir: Path) -> dict | None:
+    """The ``params.json`` document if ``out_dir`` holds a finished fit of the current inputs."""
+    pj = out_dir / "params.json"
+    if not pj.is_file():
+        return None
+    try:
+        doc = json.loads(pj.read_text())
+        inputs = doc["inputs"]
+        for fname, digest in inputs.items():
+            f = source / fname
+            if not f.is_file() or sha256(f) != digest:
+                return None
+        files = doc.get("files", {})
+        if not all((out_dir / f).is_file() for f in files.values()):
+            return None
+    except (OSError, ValueError, KeyError, TypeError, AttributeError):
+        return None
+    return doc
+
+
+def _clean_temporaries(out_dir: Path) -> None:
+    if out_dir.is_dir():
+        for f in out_dir.iterdir():
+            if f.name.startswith(".") and f.name.endswith(".tmp") and f.is_file():
+                f.unlink()
+
+
+def _row(item: BatchItem) -> dict:
+    row = {k: "" for k in SUMMARY_COLUMNS}
+    row.update(capture=item.name, status=item.status, error=item.error, source=str(item.source))
+    d = item.params
+    if d:
+        p, e = d["params"], d["stderr"]
+        row.update(method=d["method"], model=d["model"], normalization=d["normalization"],
+                   fit_status=d["fit"]["status"],
+                   # methods without a least-squares fit (smartphone) have neither
+                   reduced_chi2=_num(d["fit"].get("reduced_chi2")),
+                   valid_pixels=d["fit"].get("diagnostics", {}).get("pixels", {}).get("valid", ""))
+        for src, suffix in ((p, ""), (e, "_err")):
+            for i, ch in enumerate("rgb"):
+                row[f"rho_d_{ch}{suffix}"] = _num(src["rho_d"][i])
+            for k in ("rho_s", "alpha_x", "alpha_y"):
+                row[f"{k}{suffix}"] = _num(src[k])
+    return row
+
+
+def _num(x) -> str:
+    return "" if x is None else f"{float(x):.6g}"
+
+
+def write_summary(path: Path, items: list[BatchItem]) -> None:
+    """``summary.csv``: one row per capture, in batch order (atomic)."""
+    buf = io.StringIO()
+    wr = csv.DictWriter(buf, fieldnames=SUMMARY_COLUMNS, lineterminator="\n")
+    wr.writeheader()
+    for it in items:
+        wr.writerow(_row(it))
+    write_bytes_atomic(path, buf.getvalue().encode())
+
+
+def _one_line(e: BaseException) -> str:
+    if isinstance(e, CaptureError):
+        return str(e)
+    text = str(e).strip().splitlines()
+    return f"internal error: {type(e).__name__}: {text[0] if text else ''}"
+
+
+def run_batch(
+    paths,
+    out,
+    *,
+    force: bool = False,
+    progress: Callable[[int, int, BatchItem], None] | None = None,
+    on_start: Callable[[int, int, str], None] | None = None,
+) -> list[BatchItem]:
+    """Fit every capture under ``paths`` into ``out``; write ``out/summary.csv``.
+
+    Parameters
+    ----------
+    paths
+        Capture folders or folders of them (see :func:`find_captures`).
+    out
+        Output folder; each capture gets ``out/<name>/``.
+    force
+        Refit captures that are already finished.
+    progress, on_start
+        Callbacks ``(index, total, item)`` after and ``(index, total, name)``
+        before each capture (the CLI draws its progress bar with them).
+
+    Returns
+    -------
+    list of BatchItem
+        In batch order; ``status`` is ``"ok"`` or ``"error"`` with the one-line error.
+    """
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    captures = find_captures(paths)
+    names = _names(captures)
+    created = datetime.datetime.now(datetime.timezone.utc).replace(microsecond=0).isoformat().replace("+00:00", "Z")
+    items: list[BatchItem] = []
+    for i, (src, name) in enumerate(zip(captures, names)):
+        if on_start:
+            on_start(i, len(captures), name)
+        out_dir = out / name
+        _clean_temporaries(out_dir)
+        doc = None if force else _finished(src, out_dir)
+        if doc is not None:
+            item = BatchItem(src, name, "ok", skipped=True, params=doc)
+        else:
+            try:
+                cap = load_capture(src)
+                fitter = FITTERS.get(cap.method)
+                if fitter is None:
+                    raise CaptureError(CAPTURE_FILE, "method", f"no fitter for method {cap.method!r}")
+                doc = fitter(cap, out_dir, created)
+                item = BatchItem(src, name, "ok", params=doc)
+            except Exception as e:  # a bad capture must not sink the batch
+                item = BatchItem(src, name, "error", error=_one_line(e))
+        items.append(item)
+        write_summary(out / "summary.csv", items)
+        if progress:
+            progress(i, len(captures), item)
+    write_summary(out / "summary.csv", items)
+    return items

@@ -1,0 +1,329 @@
+"""The ``wardjax`` command line (click + rich).
+
+Each subcommand is a thin shell over a library function: it parses, calls,
+prints, and turns a bad input into one clear line on stderr (exit code 2)
+rather than a traceback.
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import click
+from rich.console import Console
+from rich.markup import escape
+
+__all__ = ["main"]
+
+console = Console()
+
+
+@click.group(context_settings={"help_option_names": ["-h", "--help"]})
+@click.version_option(package_name="wardjax")
+@click.option("--cache-dir", type=click.Path(file_okay=False, path_type=Path), envvar="WARDJAX_CACHE_DIR",
+              default=None, show_envvar=True,
+              help="Where compiled kernels are kept between runs [default: the user cache folder].")
+@click.option("--no-cache", is_flag=True, envvar="WARDJAX_NO_CACHE", show_envvar=True,
+              help="Compile afresh and keep nothing between runs.")
+def main(cache_dir: Path | None, no_cache: bool) -> None:
+    """Measure Ward BRDF parameters from photographs, with honest uncertainties."""
+    if not no_cache:
+        _enable_compile_cache(cache_dir)
+
+
+def _enable_compile_cache(cache_dir: Path | None) -> None:
+    """Keep XLA's compiled programs on disk, so that a second run skips most compilation.
+
+    Compiling the kernels costs tens of seconds per process; JAX's persistent
+    cache makes that a one-time cost per machine and shape. Set here, in the
+    command (the process is ours), never on import of the library.
+    """
+    import jax
+    import platformdirs
+
+    path = Path(cache_dir) if cache_dir else Path(platformdirs.user_cache_dir("wardjax")) / "xla"
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+    except OSError:
+        return  # a read-only home: run without the cache rather than fail
+    jax.config.update("jax_compilation_cache_dir", str(path))
+    jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
+
+
+def _fail(message: str) -> None:
+    """Print one unwrapped ``error: …`` line on stderr and exit with status 2.
+
+    ``soft_wrap`` keeps a long message (a deep path) on one line, and the
+    message is escaped so that text like ``[y0, y1, x0, x1]`` is not read as
+    rich markup.
+    """
+    Console(stderr=True, soft_wrap=True).print(f"[bold red]error:[/] {escape(message)}", highlight=False)
+    sys.exit(2)
+
+
+# --------------------------------------------------------------------------- demo
+
+
+@main.command()
+@click.option("--out", "out_dir", type=click.Path(file_okay=False, path_type=Path), default=Path("demo-output"),
+              show_default=True, help="Folder for the simulated captures and the results.")
+@click.option("--seed", type=int, default=0, show_default=True)
+def demo(out_dir: Path, seed: int) -> None:
+    """Simulate the desk and marble captures of the paper's Table 1, fit them, compare with the truth."""
+    from ._demo import run_capture_demo
+
+    run_capture_demo(out_dir, seed=seed, console=console)
+
+
+# --------------------------------------------------------------------------- gratings (smartphone method)
+
+
+@main.command()
+@click.option("--display", "display_name", default="iphone5s", show_default=True,
+              help="Display in calibration/smartphone_setup.toml.")
+@click.option("--viewing", "viewing_name", default="paper", show_default=True,
+              help="Viewing geometry in calibration/smartphone_setup.toml (for the CPD column).")
+@click.option("--out", "out_dir", type=click.Path(file_okay=False, path_type=Path), required=True,
+              help="Folder for the PNG set and gratings.csv.")
+@click.option("--orientation", type=click.Choice(["vertical", "horizontal"]), default="vertical",
+              show_default=True)
+def gratings(display_name: str, viewing_name: str, out_dir: Path, orientation: str) -> None:
+    """Write the square-wave grating PNGs (1 PNG per whole PPB) to load onto the phone."""
+    from ..smartphone import write_gratings
+
+    try:
+        paths = write_gratings(out_dir, display_name, viewing_name, orientation=orientation)
+    except (ValueError, OSError) as exc:
+        _fail(str(exc))
+    console.print(f"wrote {len(paths)} gratings and gratings.csv to {out_dir}")
+
+
+# --------------------------------------------------------------------------- end gratings
+
+
+# --------------------------------------------------------------------------- capture pipeline (issue 3)
+
+
+@main.command("fit")
+@click.argument("paths", nargs=-1, required=True, type=click.Path(path_type=Path))
+@click.option("--out", "out_dir", type=click.Path(file_okay=False, path_type=Path), required=True,
+              help="Folder for the results: one subfolder per capture and summary.csv.")
+@click.option("--force", is_flag=True, help="Refit captures whose results are already complete.")
+@click.option("--quiet", is_flag=True, help="No progress bar or table.")
+def fit_cmd(paths: tuple[Path, ...], out_dir: Path, force: bool, quiet: bool) -> None:
+    """Fit capture folders (or folders of them): params.json, ρd texture, scanline plot, material.rad.
+
+    A capture that cannot be used is reported with one line and the batch goes
+    on; the exit status is 2 if any capture failed. Rerunning skips finished
+    captures unless --force.
+    """
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+
+    from ._batch import run_batch
+
+    err = Console(stderr=True)
+    missing = [str(p) for p in paths if not p.exists()]
+    if missing:
+        err.print(f"[bold red]error:[/] {missing[0]}: no such capture folder", highlight=False, soft_wrap=True)
+        sys.exit(2)
+    with Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
+                  console=err, disable=quiet, transient=True) as bar:
+        task = bar.add_task("fitting", total=None)
+
+        def on_start(i, n, name):
+            bar.update(task, total=n, completed=i, description=f"fitting {name}")
+
+        def progress(i, n, item):
+            bar.update(task, completed=i + 1)
+            if item.status == "error":
+                err.print(f"[bold red]error:[/] {item.name}: {item.error}", highlight=False, soft_wrap=True)
+
+        items = run_batch(paths, out_dir, force=force, progress=progress, on_start=on_start)
+    if not quiet:
+        from rich.table import Table
+
+        t = Table(title=f"{len(items)} capture(s) → {out_dir}/summary.csv")
+        for col in ("capture", "status", "ρs", "αx", "αy", "χ²/dof"):
+            t.add_column(col)
+        for it in items:
+            if it.params:
+                p, e = it.params["params"], it.params["stderr"]
+                pm = lambda k: f"{p[k]:.4f} ± {e[k]:.4f}" if p[k] is not None and e[k] is not None else "–"  # noqa: E731
+                rc = it.params["fit"].get("reduced_chi2")  # none for the smartphone method
+                t.add_row(it.name, "skipped (done)" if it.skipped else "ok", pm("rho_s"), pm("alpha_x"),
+                          pm("alpha_y"), f"{rc:.3g}" if rc is not None else "–")
+            else:
+                t.add_row(it.name, "[red]error[/]", "", "", "", "")
+        console.print(t)
+    if any(it.status == "error" for it in items):
+        sys.exit(2)
+
+
+@main.command("simulate")
+@click.argument("out_dir", type=click.Path(file_okay=False, path_type=Path))
+@click.option("--material", type=click.Choice(["desk", "marble"]), default=None,
+              help="Take the parameters of the image-based paper's Table 1.")
+@click.option("--rho-d", nargs=3, type=float, default=(0.6, 0.5, 0.4), show_default=True)
+@click.option("--rho-s", type=float, default=0.04, show_default=True)
+@click.option("--alpha-x", type=float, default=0.12, show_default=True)
+@click.option("--alpha-y", type=float, default=0.15, show_default=True)
+@click.option("--texture", type=click.Choice(["wood", "marble", "none"]), default="wood", show_default=True)
+@click.option("--encoding", type=click.Choice(["srgb", "gamma2.2", "linear"]), default="srgb", show_default=True)
+@click.option("--bit-depth", type=click.Choice(["8", "16"]), default="8", show_default=True)
+@click.option("--format", "image_format", type=click.Choice(["png", "tif", "jpg"]), default="png", show_default=True)
+@click.option("--size", nargs=2, type=click.IntRange(16, 20000), default=(320, 240), show_default=True,
+              help="Image width and height in pixels.")
+@click.option("--seed", type=int, default=0, show_default=True)
+def simulate_cmd(out_dir, material, rho_d, rho_s, alpha_x, alpha_y, texture, encoding, bit_depth, image_format,
+                 size, seed) -> None:
+    """Write a simulated capture folder (lit/dark images + capture.toml + truth) to OUT_DIR."""
+    from .._data import table1_materials
+    from ..simulate import simulate_capture
+    from ..ward import WardParams
+
+    p = table1_materials()[material] if material else WardParams(rho_d=rho_d, rho_s=rho_s, alpha_x=alpha_x,
+                                                                   alpha_y=alpha_y)
+    try:
+        cap = simulate_capture(p, out_dir, seed=seed, image_size=tuple(size), texture=texture, encoding=encoding,
+                               bit_depth=int(bit_depth), image_format=image_format)
+    except ValueError as e:
+        _fail(str(e).splitlines()[0])
+    console.print(f"wrote capture [bold]{cap.name}[/] ({cap.rig.camera.width}×{cap.rig.camera.height}, "
+                  f"{encoding} {bit_depth}-bit {image_format}) to {out_dir}/")
+
+
+# --------------------------------------------------------------------------- end capture pipeline
+
+
+# --------------------------------------------------------------------------- texture (issue 6)
+
+
+def _parse_region(text: str | None) -> tuple[int, int, int, int] | None:
+    """``"Y0:Y1,X0:X1"`` → ``(y0, y1, x0, x1)``."""
+    if text is None:
+        return None
+    try:
+        rows, cols = text.split(",")
+        y0, y1 = (int(v) for v in rows.split(":"))
+        x0, x1 = (int(v) for v in cols.split(":"))
+    except ValueError:
+        _fail(f"--region {text!r}: expected Y0:Y1,X0:X1 (rows then columns, half-open), e.g. 0:512,100:612")
+    return y0, y1, x0, x1
+
+
+def _parse_size(text: str) -> tuple[int, int]:
+    """``"WIDTHxHEIGHT"`` → ``(height, width)``."""
+    try:
+        w, h = (int(v) for v in text.lower().split("x"))
+    except ValueError:
+        _fail(f"--size {text!r}: expected WIDTHxHEIGHT in pixels, e.g. 2048x1024")
+    if w < 1 or h < 1:
+        _fail(f"--size {text!r}: width and height must be positive")
+    return h, w
+
+
+@main.group()
+def texture() -> None:
+    """Parametric ρd texture: analyse a ρd map, synthesise any size from it (Heeger–Bergen)."""
+
+
+@texture.command("analyze")
+@click.argument("rho_d_path", metavar="RHO_D", type=click.Path(path_type=Path))
+@click.option("-o", "--out", "out_path", type=click.Path(dir_okay=False, path_type=Path), required=True,
+              help="Texture description to write: .json or .npz.")
+@click.option("--region", default=None, metavar="Y0:Y1,X0:X1",
+              help="Pixels to analyse (default: the largest rectangle of valid pixels).")
+@click.option("--height", type=int, default=None, help="Pyramid levels (default: up to 4, as the region allows).")
+@click.option("--quantiles", type=click.IntRange(2, 4097), default=129, show_default=True,
+              help="Entries per quantile table.")
+@click.option("--rho-s", type=float, default=0.0, show_default=True,
+              help="Specular reflectance; synthesis clamps ρd to [0, 1 − ρs].")
+def texture_analyze(rho_d_path: Path, out_path: Path, region: str | None, height: int | None, quantiles: int,
+                    rho_s: float) -> None:
+    """Describe the ρd texture in RHO_D (a linear .tif/.npy, NaN = no data) by its subband histograms."""
+    from ..texture import analyze_texture, read_rho_d
+
+    try:
+        model = analyze_texture(read_rho_d(rho_d_path), region=_parse_region(region), height=height,
+                                n_quantiles=quantiles, rho_s=rho_s)
+        model.save(out_path)
+    except ValueError as e:
+        _fail(str(e).splitlines()[0])
+    console.print(f"analysed {model.describe_region()}", highlight=False, soft_wrap=True)
+    console.print(f"{model.channels} channel(s), {model.height} pyramid levels, {len(model.band_names)} subbands, "
+                  f"{model.n_quantiles} quantiles each; wrote {out_path} ({out_path.stat().st_size / 1024:.0f} KiB)",
+                  highlight=False, soft_wrap=True)
+
+
+@texture.command("synthesize")
+@click.argument("model_path", metavar="TEXTURE", type=click.Path(path_type=Path))
+@click.option("--size", required=True, metavar="WIDTHxHEIGHT", help="Output size in pixels, e.g. 2048x1024.")
+@click.option("--seed", type=int, default=0, show_default=True)
+@click.option("--iterations", type=click.IntRange(1, 100), default=5, show_default=True)
+@click.option("-o", "--out", "out_path", type=click.Path(dir_okay=False, path_type=Path), required=True,
+              help=".tif: linear float ρd; .png: 8-bit sRGB view.")
+def texture_synthesize(model_path: Path, size: str, seed: int, iterations: int, out_path: Path) -> None:
+    """Synthesise a seamlessly tiling ρd texture of any size from a TEXTURE description."""
+    from ..texture import TextureModel, synthesize_texture, write_texture_image
+
+    shape = _parse_size(size)
+    if out_path.suffix.lower() not in (".tif", ".tiff", ".png"):
+        _fail(f"{out_path}: unknown image type {out_path.suffix!r}, expected .tif, .tiff or .png")
+    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+
+    try:
+        model = TextureModel.load(model_path)
+        with Progress(TextColumn("synthesising"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
+                      console=Console(stderr=True), transient=True) as bar:
+            task = bar.add_task("", total=iterations)
+            result = synthesize_texture(model, shape, seed=seed, iterations=iterations,
+                                        progress=lambda k, n: bar.update(task, completed=k))
+        write_texture_image(out_path, result.image)
+    except ValueError as e:
+        _fail(str(e).splitlines()[0])
+    dist = " ".join(f"{d:.3f}" for d in result.distance)
+    console.print(f"subband KS distance: start {result.initial_distance:.3f}, per iteration {dist}", highlight=False,
+                  soft_wrap=True)
+    console.print(f"wrote {out_path} ({shape[1]}x{shape[0]}, seed {seed})", highlight=False, soft_wrap=True)
+
+
+# --------------------------------------------------------------------------- end texture
+
+
+# --------------------------------------------------------------------------- diagnose (issue 5: missing effects)
+
+
+@main.command("diagnose")
+@click.argument("capture", type=click.Path(path_type=Path))
+@click.option("--out", "out_dir", type=click.Path(file_okay=False, path_type=Path), required=True,
+              help="Folder for report.json, report.md and the PNGs.")
+@click.option("--max-steps", type=click.IntRange(0, 10), default=4, show_default=True,
+              help="At most this many effects are added.")
+@click.option("--max-samples", type=click.IntRange(100, 10_000_000), default=20_000, show_default=True,
+              help="Bin the probe to at most this many pixels per channel.")
+def diagnose_cmd(capture: Path, out_dir: Path, max_steps: int, max_samples: int) -> None:
+    """Find the effects a capture needs beyond the Ward model: report.json, report.md, residual plots."""
+    from ..capture import CaptureError, load_capture
+    from ..effects import ScanlineModel, discover
+    from ..effects._capture import capture_data
+
+    if not capture.exists():
+        _fail(f"{capture}: no such capture folder")
+    try:
+        cap = load_capture(capture)
+        data = capture_data(cap, max_samples=max_samples)
+        rep = discover(ScanlineModel(cap.config.fit.normalization), data, max_steps=max_steps)
+        rep.save(out_dir, extra={"capture": cap.name})
+    except (CaptureError, ValueError, OSError) as exc:
+        _fail(str(exc).splitlines()[0])
+    gaps = " → ".join(f"{g:.3f}" for g in rep.gap)
+    console.print(f"{cap.name}: {rep.verdict()}; gap {gaps}; report in {out_dir}/", highlight=False)
+
+
+# --------------------------------------------------------------------------- end diagnose
+
+
+if __name__ == "__main__":  # pragma: no cover
+    main()
+

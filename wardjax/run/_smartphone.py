@@ -1,0 +1,40 @@
+"""A smartphone capture, end to end: the method on the photo and thresholds, then its outputs."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from ..capture import CAPTURE_FILE, CaptureError, SmartphoneCapture
+from ..export import write_smartphone_outputs
+from ..smartphone import fit_smartphone
+from ..ward import WardParams
+
+__all__ = ["fit_smartphone_capture"]
+
+
+def fit_smartphone_capture(cap: SmartphoneCapture, out_dir: Path, *, created: str) -> dict:
+    """Fit a smartphone capture and write ``params.json`` and ``material.rad`` into ``out_dir``.
+
+    ``params.json`` follows the one schema (``wardjax.params/1``); the α
+    posterior's 68/95 % intervals, autocorrelation time and acceptance go
+    under ``fit.posterior``.
+    """
+    cfg = cap.config
+    t = cfg.thresholds
+    try:
+        params, stderr, post = fit_smartphone(
+            cap.photo, tuple(cfg.photo.region), ppb=t.ppb, ppb_mean=t.ppb_mean, n_observers=t.n_observers,
+            display=cfg.setup.display, viewing=cfg.setup.viewing, decoding=cfg.photo.decoding,
+            n=cfg.specular.n, n_range=tuple(cfg.specular.n_range), seed=cfg.fit.seed,
+        )
+    except ValueError as e:  # thresholds out of the display's range, a region of one colour…
+        raise CaptureError(CAPTURE_FILE, "thresholds", str(e).splitlines()[0]) from None
+    err = WardParams(rho_d=np.asarray(stderr["rho_d"]), rho_s=stderr["rho_s"],
+                     alpha_x=stderr["alpha_x"], alpha_y=stderr["alpha_y"])
+    return write_smartphone_outputs(
+        out_dir, name=cap.name, params=params, stderr=err, posterior=post,
+        rho_s_source=f"Fresnel, n = {cfg.specular.n} (range {list(cfg.specular.n_range)})",
+        inputs=cap.checksums, created=created,
+    )

@@ -1,0 +1,217 @@
+"""ColorChecker validation of the ρd method (smartphone paper, section 3.2).
+
+- :func:`colorchecker_reference_Lab`: the 24 reference CIELAB values under D50, either
+  from colour-science's published chromaticities (``"ColorChecker24 - After November
+  2014"``, X-Rite's) or computed from its reflectance spectra under D50.
+- :func:`simulate_colorchecker_photo`: a synthetic, ideal camera's photo of the chart.
+- :func:`colorchecker_patch_regions`: patch boxes from a manual grid layout.
+- :func:`fit_camera_correction`: a chart-based camera correction (a per-channel power
+  and a 3×3 matrix in linear RGB, white E) fitted on CIELAB differences.
+"""
+
+from __future__ import annotations
+
+import io
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import colour
+import imageio.v3 as iio
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from ._color import delta_E_CIE1976, diffuse_from_srgb, diffuse_to_Lab
+
+__all__ = [
+    "COLORCHECKER_NAMES",
+    "CameraCorrection",
+    "colorchecker_delta_E",
+    "colorchecker_patch_regions",
+    "colorchecker_reference_Lab",
+    "colorchecker_rho_d",
+    "fit_camera_correction",
+    "simulate_colorchecker_photo",
+]
+
+_CC_CHROMATICITIES = "ColorChecker24 - After November 2014"
+_CC_SPECTRA = "BabelColor Average"
+_CMFS = "CIE 1931 2 Degree Standard Observer"
+
+COLORCHECKER_NAMES: tuple[str, ...] = tuple(colour.CCS_COLOURCHECKERS[_CC_CHROMATICITIES].data.keys())
+"""Patch names in chart order: row by row, dark skin (1) … black (24)."""
+
+
+def _sds():
+    sds = colour.SDS_COLOURCHECKERS[_CC_SPECTRA]
+    return [sds[name] for name in sds]
+
+
+def _XYZ_of_spectra(illuminant: str) -> NDArray:
+    """XYZ (perfect white: Y = 1) of the 24 chart spectra under a CIE illuminant."""
+    sds = _sds()
+    shape = sds[0].shape                       # 380–730 nm, 10 nm: align the CMFs and illuminant to it
+    cmfs = colour.MSDS_CMFS[_CMFS].copy().align(shape)
+    ill = colour.SDS_ILLUMINANTS[illuminant].copy().align(shape)
+    return np.array([colour.sd_to_XYZ(sd, cmfs, ill, method="Integration") for sd in sds]) / 100.0
+
+
+def colorchecker_reference_Lab(source: str = "chromaticities") -> NDArray:
+    """Reference CIELAB (D50) of the 24 patches, in chart order, shape (24, 3).
+
+    ``source="chromaticities"``: colour-science's ``CCS_COLOURCHECKERS["ColorChecker24 -
+    After November 2014"]`` (X-Rite, D50). ``source="spectra"``: its
+    ``SDS_COLOURCHECKERS["BabelColor Average"]`` spectra integrated under D50 (CIE 1931 2°).
+    """
+    if source == "chromaticities":
+        cc = colour.CCS_COLOURCHECKERS[_CC_CHROMATICITIES]
+        xyY = np.array(list(cc.data.values()))
+        return np.asarray(colour.XYZ_to_Lab(colour.xyY_to_XYZ(xyY), cc.illuminant))
+    if source == "spectra":
+        d50 = colour.CCS_ILLUMINANTS[_CMFS]["D50"]
+        return np.asarray(colour.XYZ_to_Lab(_XYZ_of_spectra("D50"), d50))
+    raise ValueError(f"source must be 'chromaticities' or 'spectra'; got {source!r}")
+
+
+def simulate_colorchecker_photo(
+    *,
+    patch_px: int = 32,
+    gap_px: int = 8,
+    jpeg_quality: int | None = 95,
+    clip: bool = True,
+    quantize: bool = True,
+) -> tuple[NDArray, list[tuple[int, int, int, int]]]:
+    """Photo of the chart by an ideal sRGB camera under D65, and the 24 patch boxes.
+
+    Each patch's XYZ is its spectrum (BabelColor Average) under CIE D65, scaled so a
+    perfect white has Y = 1; the camera is white-balanced to D65, so XYZ → linear sRGB
+    with no adaptation, and a perfect white gives RGB = (1, 1, 1) before encoding. The
+    values are clipped to [0, 1] (``clip``), encoded with the exact sRGB curve, rounded to
+    8 bits (``quantize``) and, when ``jpeg_quality`` is set, written and read back as a
+    JPEG through imageio. The chart is laid out in its usual 4 rows × 6 columns on a
+    mid-grey surround.
+
+    Returns
+    -------
+    image : ndarray
+        ``uint8 (H, W, 3)`` when quantised, else float in [0, 1] (or beyond without clip).
+    regions : list of (y0, y1, x0, x1)
+        Central boxes (inner half of each patch), chart order.
+    """
+    rgb_lin = np.asarray(colour.XYZ_to_RGB(_XYZ_of_spectra("D65"), "sRGB", apply_cctf_encoding=False))
+    if clip:
+        rgb_lin = np.clip(rgb_lin, 0.0, 1.0)
+    enc = np.sign(rgb_lin) * np.asarray(colour.cctf_encoding(np.abs(rgb_lin), function="sRGB"))
+    pitch = patch_px + gap_px
+    h, w = 4 * pitch + gap_px, 6 * pitch + gap_px
+    img = np.full((h, w, 3), float(colour.cctf_encoding(0.18, function="sRGB")))
+    regions = []
+    q = patch_px // 4
+    for i in range(24):
+        r, c = divmod(i, 6)
+        y0, x0 = gap_px + r * pitch, gap_px + c * pitch
+        img[y0 : y0 + patch_px, x0 : x0 + patch_px] = enc[i]
+        regions.append((y0 + q, y0 + patch_px - q, x0 + q, x0 + patch_px - q))
+    if not quantize:
+        return img, regions
+    img8 = np.round(np.clip(img, 0.0, 1.0) * 255.0).astype(np.uint8)
+    if jpeg_quality is not None:
+        buf = io.BytesIO()
+        iio.imwrite(buf, img8, extension=".jpg", quality=int(jpeg_quality))
+        img8 = iio.imread(buf.getvalue(), extension=".jpg")
+    return img8, regions
+
+
+def colorchecker_patch_regions(
+    first_center: tuple[float, float],
+    pitch: tuple[float, float],
+    grid: tuple[int, int],
+    half_size: int,
+    order: Sequence[int],
+) -> list[tuple[int, int, int, int]]:
+    """Boxes around a regular grid of patch centres, returned in chart order.
+
+    Parameters
+    ----------
+    first_center
+        ``(y, x)`` pixel centre of the grid's top-left patch.
+    pitch
+        ``(dy, dx)`` centre-to-centre spacing in pixels.
+    grid
+        ``(rows, cols)`` of the grid as it appears in the image.
+    half_size
+        Box half-width: each box is ``(yc − h, yc + h + 1, xc − h, xc + h + 1)``.
+    order
+        For each grid cell in row-major image order, the chart index (0–23) it shows.
+    """
+    rows, cols = grid
+    if len(order) != rows * cols or sorted(order) != list(range(rows * cols)):
+        raise ValueError(f"order must be a permutation of 0..{rows * cols - 1}; got {list(order)}")
+    boxes: list = [None] * (rows * cols)
+    for cell, idx in enumerate(order):
+        r, c = divmod(cell, cols)
+        yc = int(round(first_center[0] + r * pitch[0]))
+        xc = int(round(first_center[1] + c * pitch[1]))
+        boxes[idx] = (yc - half_size, yc + half_size + 1, xc - half_size, xc + half_size + 1)
+    return boxes
+
+
+def colorchecker_rho_d(image: ArrayLike, regions, *, decoding="gamma2.2") -> NDArray:
+    """ρd (sRGB primaries, white E) of each patch box, shape (len(regions), 3)."""
+    return np.array([diffuse_from_srgb(image, r, decoding=decoding) for r in regions])
+
+
+@dataclass(frozen=True)
+class CameraCorrection:
+    """``ρd' = M · ρd^γ`` (power per channel, then a 3×3 matrix), in linear RGB (white E).
+
+    ``γ`` corrects a camera whose tone curve is not the assumed decoding (γ = 1: none);
+    ``M`` its primaries and white balance.
+    """
+
+    gamma: float
+    matrix: NDArray
+
+    def apply(self, rho_d: ArrayLike) -> NDArray:
+        r = np.clip(np.asarray(rho_d, dtype=np.float64), 1e-6, None)
+        return r**self.gamma @ self.matrix.T
+
+
+def fit_camera_correction(rho_d: ArrayLike, reference_Lab: ArrayLike, *, tone: bool = True) -> CameraCorrection:
+    """Fit :class:`CameraCorrection` to chart patches by least squares on CIELAB (D50) differences.
+
+    Parameters
+    ----------
+    rho_d
+        The method's ρd of the patches, (N, 3); leave out clipped patches.
+    reference_Lab
+        Their reference CIELAB under D50, (N, 3).
+    tone
+        Fit the exponent γ too (10 parameters, N ≥ 4); else γ = 1 (a plain 3×3 matrix, N ≥ 3).
+
+    The residuals are the Lab differences, so the fit minimises Σ ΔE*ab² directly.
+    """
+    from scipy.optimize import least_squares
+
+    x = np.asarray(rho_d, dtype=np.float64)
+    ref = np.asarray(reference_Lab, dtype=np.float64)
+    need = 4 if tone else 3
+    if x.ndim != 2 or x.shape[-1] != 3 or x.shape[0] < need or ref.shape != x.shape:
+        raise ValueError(f"rho_d and reference_Lab must both be (N ≥ {need}, 3); got {x.shape} and {ref.shape}")
+    x = np.clip(x, 1e-6, None)
+
+    def unpack(p):
+        return (float(np.exp(p[0])) if tone else 1.0), p[-9:].reshape(3, 3)
+
+    def residual(p):
+        g, m = unpack(p)
+        return (diffuse_to_Lab(np.clip(x**g @ m.T, 1e-6, None), "D50") - ref).ravel()
+
+    p0 = np.r_[[0.0] if tone else [], np.eye(3).ravel()]
+    sol = least_squares(residual, p0)
+    g, m = unpack(sol.x)
+    return CameraCorrection(gamma=g, matrix=m)
+
+
+def colorchecker_delta_E(rho_d: ArrayLike, reference_Lab: ArrayLike) -> NDArray:
+    """Per-patch CIE 1976 ΔE*ab of ρd → Lab (D50, section 3.2) against the reference."""
+    return delta_E_CIE1976(diffuse_to_Lab(rho_d, "D50"), reference_Lab)

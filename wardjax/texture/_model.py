@@ -1,0 +1,224 @@
+"""The parametric texture description and its file format (``.json`` or ``.npz``).
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import equinox as eqx
+import numpy as np
+
+from .._files import atomic_path, write_json_atomic
+from ._pyramid import (
+    ORIENTATIONS,
+)
+from ._steerable import band_names
+
+TEXTURE_FORMAT = "wardjax.texture"
+TEXTURE_FORMAT_VERSION = 1
+"""Version of the saved texture description; bumped when the file layout changes."""
+
+# ================================================================== texture model
+
+
+class TextureModel(eqx.Module):
+    """The parametric texture of section 4.2: quantile tables of pixels and subbands, per decorrelated channel.
+
+    Colour is handled as Heeger & Bergen suggest: RGB pixels ``x`` are
+    decorrelated with a PCA, ``d = Vᵀ (x − μ)``, each channel of ``d`` is
+    described and synthesised alone, and ``x = V d + μ`` maps back.
+
+    Attributes
+    ----------
+    pca_mean
+        ``(C,)`` channel mean ``μ`` of the analysed region.
+    pca_basis
+        ``(C, C)`` orthonormal ``V``; column ``k`` is principal axis ``k``
+        (largest variance first, largest component positive).
+    probabilities
+        ``(Q,)`` the probabilities of every quantile table, increasing from 0
+        to 1 (:func:`quantile_probabilities`: denser in the tails).
+    pixel_quantiles
+        ``(C, Q)`` quantiles of each decorrelated channel's pixels
+        (``[:, 0]`` min, ``[:, -1]`` max).
+    band_quantiles
+        ``(C, B, Q)`` the same for each subband, ``B = 2 + 4 height``, in the
+        order of :attr:`band_names`; subbands are taken from the periodic
+        component of each channel, so image borders leave no trace.
+    height
+        Pyramid levels.
+    rho_s
+        ``(C,)`` specular reflectance: synthesis clamps ρd to ``[0, 1 − ρs]``.
+    source_shape
+        ``(H, W)`` of the image the texture was analysed from.
+    region
+        ``(y0, y1, x0, x1)`` the analysed rectangle (half-open, in pixels).
+    region_source
+        ``"argument"`` (given by the caller), ``"whole image"`` (no invalid
+        pixels) or ``"largest valid rectangle"`` (the input held NaN).
+    """
+
+    pca_mean: np.ndarray
+    pca_basis: np.ndarray
+    probabilities: np.ndarray
+    pixel_quantiles: np.ndarray
+    band_quantiles: np.ndarray
+    height: int = eqx.field(static=True)
+    rho_s: np.ndarray
+    source_shape: tuple[int, int] = eqx.field(static=True)
+    region: tuple[int, int, int, int] = eqx.field(static=True)
+    region_source: str = eqx.field(static=True)
+    version: int = eqx.field(static=True, default=TEXTURE_FORMAT_VERSION)
+
+    @property
+    def channels(self) -> int:
+        return int(self.pca_mean.shape[0])
+
+    @property
+    def n_quantiles(self) -> int:
+        return int(self.pixel_quantiles.shape[-1])
+
+    @property
+    def band_names(self) -> tuple[str, ...]:
+        return band_names(self.height)
+
+    def describe_region(self) -> str:
+        """One line saying which pixels were analysed and why."""
+        y0, y1, x0, x1 = self.region
+        return (
+            f"rows {y0}:{y1}, columns {x0}:{x1} ({y1 - y0}x{x1 - x0} of {self.source_shape[0]}x"
+            f"{self.source_shape[1]} pixels; {self.region_source})"
+        )
+
+    # ------------------------------------------------------------------ files
+
+    def to_dict(self) -> dict:
+        """Plain-Python form (lists and numbers) of the model; what :meth:`save` writes as JSON."""
+
+        def rounded(a):  # float32 precision is all the quantiles carry
+            return np.vectorize(lambda v: float(f"{v:.8g}"), otypes=[float])(np.asarray(a, np.float64)).tolist()
+
+        return {
+            "format": TEXTURE_FORMAT,
+            "version": self.version,
+            "height": self.height,
+            "orientations": ORIENTATIONS,
+            "channels": self.channels,
+            "n_quantiles": self.n_quantiles,
+            "source_shape": list(self.source_shape),
+            "region": list(self.region),
+            "region_source": self.region_source,
+            "rho_s": rounded(self.rho_s),
+            "pca_mean": np.asarray(self.pca_mean, np.float64).tolist(),
+            "pca_basis": np.asarray(self.pca_basis, np.float64).tolist(),
+            "probabilities": np.asarray(self.probabilities, np.float64).tolist(),
+            "pixel_quantiles": rounded(self.pixel_quantiles),
+            "band_names": list(self.band_names),
+            "band_quantiles": rounded(self.band_quantiles),
+        }
+
+    @classmethod
+    def from_dict(cls, d: dict, *, source: str = "texture description") -> "TextureModel":
+        """Validate and build a model from :meth:`to_dict`'s form; errors name ``source`` and the field."""
+
+        def field(name):
+            if name not in d:
+                raise ValueError(f"{source}: missing field {name!r}")
+            return d[name]
+
+        if field("format") != TEXTURE_FORMAT:
+            raise ValueError(f"{source}: field 'format' is {d['format']!r}, expected {TEXTURE_FORMAT!r}")
+        version = field("version")
+        if version != TEXTURE_FORMAT_VERSION:
+            raise ValueError(
+                f"{source}: field 'version' is {version!r}; this wardjax reads version {TEXTURE_FORMAT_VERSION}"
+            )
+
+        def integer(name, lo):
+            v = field(name)
+            if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < lo:
+                raise ValueError(f"{source}: field {name!r} is {v!r}, expected an integer >= {lo}")
+            return int(v)
+
+        height, channels, q = integer("height", 0), integer("channels", 1), integer("n_quantiles", 2)
+        if integer("orientations", 1) != ORIENTATIONS:
+            raise ValueError(f"{source}: field 'orientations' is {d['orientations']!r}, expected {ORIENTATIONS}")
+        n_bands = 2 + ORIENTATIONS * height
+
+        def array(name, shape):
+            value = field(name)
+            try:
+                a = np.asarray(value, dtype=np.float64)
+            except (TypeError, ValueError):
+                raise ValueError(f"{source}: field {name!r} is not an array of numbers") from None
+            if a.shape != shape:
+                raise ValueError(f"{source}: field {name!r} has shape {a.shape}, expected {shape}")
+            if not np.isfinite(a).all():
+                raise ValueError(f"{source}: field {name!r} holds NaN or inf")
+            return a
+
+        probs = array("probabilities", (q,))
+        if probs[0] != 0 or probs[-1] != 1 or np.any(np.diff(probs) <= 0):
+            raise ValueError(f"{source}: field 'probabilities' must increase from 0 to 1")
+        pix = array("pixel_quantiles", (channels, q))
+        bands = array("band_quantiles", (channels, n_bands, q))
+        if np.any(np.diff(pix, axis=-1) < 0) or np.any(np.diff(bands, axis=-1) < 0):
+            raise ValueError(f"{source}: quantile tables must be nondecreasing")
+        names = [str(n) for n in np.asarray(field("band_names")).tolist()]
+        if tuple(names) != band_names(height):
+            raise ValueError(f"{source}: field 'band_names' does not match height {height}")
+        src_shape = tuple(int(v) for v in array("source_shape", (2,)))
+        region = tuple(int(v) for v in array("region", (4,)))
+        return cls(
+            pca_mean=array("pca_mean", (channels,)),
+            pca_basis=array("pca_basis", (channels, channels)),
+            probabilities=probs,
+            pixel_quantiles=pix,
+            band_quantiles=bands,
+            height=height,
+            rho_s=array("rho_s", (channels,)),
+            source_shape=src_shape,
+            region=region,
+            region_source=str(np.asarray(field("region_source")).item()),
+            version=int(version),
+        )
+
+    def save(self, path) -> Path:
+        """Write the model to ``path``: ``.json`` (readable) or ``.npz``; atomically (temp file + rename)."""
+        path = Path(path)
+        d = self.to_dict()
+        suffix = path.suffix.lower()
+        if suffix == ".json":
+            write_json_atomic(path, d, compact=True)
+        elif suffix == ".npz":
+            arrays = {k: np.asarray(v) for k, v in d.items()}
+            with atomic_path(path) as tmp, open(tmp, "wb") as fh:
+                np.savez_compressed(fh, **arrays)
+        else:
+            raise ValueError(f"{path}: unknown texture file type {path.suffix!r}, expected .json or .npz")
+        return path
+
+    @classmethod
+    def load(cls, path) -> "TextureModel":
+        """Read a model written by :meth:`save` (``.json`` or ``.npz``), checking format, version and shapes."""
+        path = Path(path)
+        if not path.is_file():
+            raise ValueError(f"{path}: no such texture file")
+        suffix = path.suffix.lower()
+        if suffix == ".json":
+            try:
+                d = json.loads(path.read_text())
+            except (UnicodeDecodeError, json.JSONDecodeError) as e:
+                raise ValueError(f"{path}: not valid JSON ({e})") from None
+            if not isinstance(d, dict):
+                raise ValueError(f"{path}: expected a JSON object at top level")
+        elif suffix == ".npz":
+            try:
+                with np.load(path, allow_pickle=False) as z:
+                    d = {k: (z[k].item() if z[k].ndim == 0 else z[k]) for k in z.files}
+            except (OSError, ValueError) as e:
+                raise ValueError(f"{path}: not a readable .npz file ({e})") from None
+        else:
+            raise ValueError(f"{path}: unknown texture file type {path.suffix!r}, expected .json or .npz")
+        return cls.from_dict(d, source=str(path))
