@@ -4,7 +4,7 @@ VENV   ?= .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 
-.PHONY: install demo test test-slow bench clean
+.PHONY: install demo test test-slow lint bench clean
 
 install: $(STAMP)
 
@@ -25,6 +25,12 @@ test: install
 
 test-slow: install
 	$(PY) -m pytest -m slow $(PYTEST_PAR)
+
+# ruff (lint + format check) and pyright, configured in pyproject.toml.
+lint: install
+	$(VENV)/bin/ruff check wardjax tests benchmarks
+	$(VENV)/bin/ruff format --check wardjax tests benchmarks
+	$(VENV)/bin/pyright
 
 bench: install
 	$(PY) -m benchmarks

@@ -36,8 +36,12 @@ def capture_sized(n_scan: int = 4000, n_rows: int = 48, seed: int = 0):
 def main(argv=None) -> dict:
     ap = argparse.ArgumentParser(prog="python -m benchmarks.bench_effects")
     ap.add_argument("--draws", type=int, default=10, help="hidden-effect draws per detectable effect")
-    ap.add_argument("--gamma-draws", type=int, default=20,
-                    help="draws of the γ mismatch (its signature is mostly absorbed by the baseline)")
+    ap.add_argument(
+        "--gamma-draws",
+        type=int,
+        default=20,
+        help="draws of the γ mismatch (its signature is mostly absorbed by the baseline)",
+    )
     ap.add_argument("--null", type=int, default=100, help="null draws")
     ap.add_argument("--ool", type=int, default=10, help="out-of-library (orange peel) draws")
     ap.add_argument("--cancelled", type=int, default=3, help="draws per effect that cancels by symmetry")
@@ -51,22 +55,35 @@ def main(argv=None) -> dict:
     t0 = time.perf_counter()
 
     def progress(i, n, row):
-        print(f"  [{i + 1}/{n}] hidden={row['hidden']:<22} found={row['found']} gap {row['gap_before']:.2f} → "
-              f"{row['gap_after']:.3f} ({row['seconds']:.1f} s)", flush=True)
+        print(
+            f"  [{i + 1}/{n}] hidden={row['hidden']:<22} found={row['found']} gap {row['gap_before']:.2f} → "
+            f"{row['gap_after']:.3f} ({row['seconds']:.1f} s)",
+            flush=True,
+        )
 
-    s = eb.run_bench(a.draws, a.null, out_of_library=a.ool, cancelled=a.cancelled, progress=progress,
-                     draws={"gamma": max(a.draws, a.gamma_draws)})
+    s = eb.run_bench(
+        a.draws,
+        a.null,
+        out_of_library=a.ool,
+        cancelled=a.cancelled,
+        progress=progress,
+        draws={"gamma": max(a.draws, a.gamma_draws)},
+    )
     print("\nConfusion matrix (rows: hidden effect; columns: first effect named)\n")
     print(eb.bench_table(s))
     ool = [r for r in s["rows"] if r["hidden"] == eb.OUT_OF_LIBRARY]
     canc = [r for r in s["rows"] if r["hidden"] in eb.CANCELLED]
-    print(f"\nnamed first (detectable, all draws): {100 * s['named_first_all']:.1f} %; per effect: "
-          + ", ".join(f"{k} {100 * v:.0f} %" for k, v in s["named_first"].items()))
+    print(
+        f"\nnamed first (detectable, all draws): {100 * s['named_first_all']:.1f} %; per effect: "
+        + ", ".join(f"{k} {100 * v:.0f} %" for k, v in s["named_first"].items())
+    )
     print(f"null data: an effect added in {100 * s['null_false_rate']:.1f} % of {s['n_null']} draws")
     print(f"largest gap after discovery (correctly named): {s['gap_after_max_detectable']:.3f}")
     if ool:
-        print(f"out-of-library ({eb.OUT_OF_LIBRARY}): unexplained reported in "
-              f"{sum(r['unexplained'] for r in ool)}/{len(ool)}, a name added in {sum(bool(r['found']) for r in ool)}")
+        print(
+            f"out-of-library ({eb.OUT_OF_LIBRARY}): unexplained reported in "
+            f"{sum(r['unexplained'] for r in ool)}/{len(ool)}, a name added in {sum(bool(r['found']) for r in ool)}"
+        )
     if canc:
         print(f"cancelled by symmetry: a name added in {sum(bool(r['found']) for r in canc)}/{len(canc)}")
     print(f"(bench: {time.perf_counter() - t0:.0f} s)")
@@ -77,8 +94,10 @@ def main(argv=None) -> dict:
     print(f"\nTable 1 (smartphone paper): found {rep.found}; gap {' → '.join(f'{g:.3f}' for g in rep.gap)}")
     if rep.steps:
         st = rep.steps[0]
-        print(f"  contrast-gloss c = {st.params['c']:.3f} ± {st.stderr['c']:.3f}; ΔBIC {st.evidence.delta_bic:.1f}, "
-              f"LR p {st.evidence.p_value:.2g}")
+        print(
+            f"  contrast-gloss c = {st.params['c']:.3f} ± {st.stderr['c']:.3f}; ΔBIC {st.evidence.delta_bic:.1f}, "
+            f"LR p {st.evidence.p_value:.2g}"
+        )
     out["table1"] = {"found": rep.found, "gap": rep.gap}
 
     print("\nCUReT samples:")
@@ -87,8 +106,10 @@ def main(argv=None) -> dict:
         d, rel, sid = curet_data(i)
         r = discover(ScanlineModel(), d)
         cu.append({"sample": sid, "noise_rel": rel, "found": r.found, "gap": r.gap, "unexplained": len(r.unexplained)})
-        print(f"  sample {sid:>2}: σ/f {rel:.3f}; found {r.found}; gap {' → '.join(f'{g:.2f}' for g in r.gap)}"
-              f"{'; unexplained structure left' if r.unexplained else ''}")
+        print(
+            f"  sample {sid:>2}: σ/f {rel:.3f}; found {r.found}; gap {' → '.join(f'{g:.2f}' for g in r.gap)}"
+            f"{'; unexplained structure left' if r.unexplained else ''}"
+        )
     out["curet"] = cu
 
     if not a.skip_capture:
@@ -97,8 +118,10 @@ def main(argv=None) -> dict:
         t1, c1 = time.perf_counter(), time.process_time()
         r = discover(ScanlineModel(), data, keep_plot_data=False)  # large data: each fit solved alone
         dt, dc = time.perf_counter() - t1, time.process_time() - c1
-        print(f"\nCapture-sized discover ({a.capture_scanlines} scanlines × {a.capture_rows} binned samples × RGB = "
-              f"{n:,} residuals, full library): {dt:.1f} s wall, {dc:.1f} s CPU (found {r.found}, gap {r.gap})")
+        print(
+            f"\nCapture-sized discover ({a.capture_scanlines} scanlines × {a.capture_rows} binned samples × RGB = "
+            f"{n:,} residuals, full library): {dt:.1f} s wall, {dc:.1f} s CPU (found {r.found}, gap {r.gap})"
+        )
         out["capture_sized"] = {"residuals": n, "seconds": dt, "cpu_seconds": dc, "found": r.found}
     if a.json:
         with open(a.json, "w") as fh:

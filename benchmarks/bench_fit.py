@@ -120,18 +120,24 @@ def bench_fits(sizes, scipy_max, dtypes=(np.float64, np.float32)):
 
 def report(rows):
     print("f32: float64 data fitted in float32; f32 data: float32 arrays passed in (cast untimed).")
-    print(f"{'N':>7} | {'wardjax f64 fits/s':>18} {'compile s':>9} | {'f32 fits/s':>10} {'f32 data':>9} | "
-          f"{'SciPy FD':>9} {'SciPy jac':>9} | {'×FD':>6} {'×jac':>6} {'f32/f64':>7} {'f32 data/f64':>12}")
+    print(
+        f"{'N':>7} | {'wardjax f64 fits/s':>18} {'compile s':>9} | {'f32 fits/s':>10} {'f32 data':>9} | "
+        f"{'SciPy FD':>9} {'SciPy jac':>9} | {'×FD':>6} {'×jac':>6} {'f32/f64':>7} {'f32 data/f64':>12}"
+    )
     for r in rows:
-        print(f"{r['N']:>7} | {r['wj_float64_rate']:>18,.0f} {r['wj_float64_compile']:>9.2f} | "
-              f"{r['wj_float32_rate']:>10,.0f} {r['wj_f32in_rate']:>9,.0f} | "
-              f"{r['sp_fd_rate']:>9,.0f} {r['sp_jac_rate']:>9,.0f} | "
-              f"{r['wj_float64_rate'] / r['sp_fd_rate']:>6.0f} {r['wj_float64_rate'] / r['sp_jac_rate']:>6.0f} "
-              f"{r['wj_float32_rate'] / r['wj_float64_rate']:>7.2f} "
-              f"{r['wj_f32in_rate'] / r['wj_float64_rate']:>12.2f}")
-    print("\naccuracy (median |rel. error| of α vs truth), collapsed fits (α off > 50 %; wardjax flags them, see "
-          "how many it still reported converged), "
-          "max |rel. deviation| of wardjax from SciPy's optimum where SciPy did not collapse:")
+        print(
+            f"{r['N']:>7} | {r['wj_float64_rate']:>18,.0f} {r['wj_float64_compile']:>9.2f} | "
+            f"{r['wj_float32_rate']:>10,.0f} {r['wj_f32in_rate']:>9,.0f} | "
+            f"{r['sp_fd_rate']:>9,.0f} {r['sp_jac_rate']:>9,.0f} | "
+            f"{r['wj_float64_rate'] / r['sp_fd_rate']:>6.0f} {r['wj_float64_rate'] / r['sp_jac_rate']:>6.0f} "
+            f"{r['wj_float32_rate'] / r['wj_float64_rate']:>7.2f} "
+            f"{r['wj_f32in_rate'] / r['wj_float64_rate']:>12.2f}"
+        )
+    print(
+        "\naccuracy (median |rel. error| of α vs truth), collapsed fits (α off > 50 %; wardjax flags them, see "
+        "how many it still reported converged), "
+        "max |rel. deviation| of wardjax from SciPy's optimum where SciPy did not collapse:"
+    )
     for r in rows:
         a = np.asarray(r["truth"].alpha_x)
         m = r["m"]
@@ -140,8 +146,10 @@ def report(rows):
             res = r[f"wj_{key}_res"]
             rel = np.abs(res.params.alpha_x / a - 1)
             claimed = int(np.sum((rel > 0.5) & res.ok))
-            parts.append(f"wj {key}: {np.median(rel):.2e}, collapsed {int(np.sum(rel > 0.5))}/{len(a)} "
-                         f"({claimed} reported converged)")
+            parts.append(
+                f"wj {key}: {np.median(rel):.2e}, collapsed {int(np.sum(rel > 0.5))}/{len(a)} "
+                f"({claimed} reported converged)"
+            )
         for key in ("sp_fd", "sp_jac"):
             xs = r[f"{key}_x"]
             rel = np.abs(np.abs(xs[:, 4]) / a[:m] - 1)
@@ -149,8 +157,16 @@ def report(rows):
             dev = 0.0
             for wk in ("float64", "float32"):
                 res = r[f"wj_{wk}_res"]
-                ours = np.stack([res.params.rho_d[:m, 0], res.params.rho_d[:m, 1], res.params.rho_d[:m, 2],
-                                 res.params.rho_s[:m], res.params.alpha_x[:m]], -1)
+                ours = np.stack(
+                    [
+                        res.params.rho_d[:m, 0],
+                        res.params.rho_d[:m, 1],
+                        res.params.rho_d[:m, 2],
+                        res.params.rho_s[:m],
+                        res.params.alpha_x[:m],
+                    ],
+                    -1,
+                )
                 theirs = np.concatenate([xs[:, :4], np.abs(xs[:, 4:5])], -1)
                 d = np.max(np.abs(ours[ok] / theirs[ok] - 1)) if np.any(ok) else np.nan
                 dev = max(dev, d) if wk == "float64" else dev
@@ -163,7 +179,7 @@ def bench_ward(n=10_000_000):
     rng = np.random.default_rng(0)
     th_i, th_o = rng.uniform(0, 1.4, n), rng.uniform(0, 1.4, n)
     ph_i, ph_o = rng.uniform(0, 2 * np.pi, n), rng.uniform(0, 2 * np.pi, n)
-    d = lambda t, p: np.stack([np.sin(t) * np.cos(p), np.sin(t) * np.sin(p), np.cos(t)], -1)  # noqa: E731
+    d = lambda t, p: np.stack([np.sin(t) * np.cos(p), np.sin(t) * np.sin(p), np.cos(t)], -1)
     wi, wo = d(th_i, ph_i), d(th_o, ph_o)
     p = wj.WardParams(rho_d=(0.5, 0.4, 0.3), rho_s=0.05, alpha_x=0.1, alpha_y=0.2)
 

@@ -33,14 +33,16 @@ def main() -> None:
     am = wj.AlphaModel.from_calibration()
     kwargs = dict(ppb=[18, 17, 19], rho_d=0.8, seed=0, n_walkers=32)
     t0 = time.perf_counter()
-    am.posterior(**kwargs)                                    # compiles the two shapes once
+    am.posterior(**kwargs)  # compiles the two shapes once
     compile_s = time.perf_counter() - t0
     t_jax, post_jax = _time(lambda: am.posterior(**kwargs))
     t_np, post_np = _time(lambda: am.posterior(**kwargs, log_prob="numpy"))
     evals = post_jax.n_walkers * (post_jax.n_steps + post_jax.burn)
-    print(f"alpha posterior, one surface, {post_jax.n_walkers} walkers, "
-          f"{post_jax.n_steps} steps = {post_jax.n_steps / post_jax.tau_max:.0f} tau (tau = {post_jax.tau_max:.1f}),"
-          f" {evals} log-prob evaluations")
+    print(
+        f"alpha posterior, one surface, {post_jax.n_walkers} walkers, "
+        f"{post_jax.n_steps} steps = {post_jax.n_steps / post_jax.tau_max:.0f} tau (tau = {post_jax.tau_max:.1f}),"
+        f" {evals} log-prob evaluations"
+    )
     print(f"{'log-probability':28s}{'time (s)':>10s}{'alpha median':>14s}{'95% interval':>22s}")
     for name, t, p in (("JAX (jit, vmapped)", t_jax, post_jax), ("NumPy (plain)", t_np, post_np)):
         lo, hi = p.interval(0.95)

@@ -1,4 +1,4 @@
-"""Texture analysis + synthesis (issue 6): wardjax vs the same algorithm on pyrtools + NumPy.
+"""Texture analysis + synthesis: wardjax vs the same algorithm on pyrtools + NumPy.
 
 Both sides run the same Heeger–Bergen algorithm on the same 1024² RGB ρd
 texture: PCA decorrelation of RGB, periodic + smooth decomposition, steerable
@@ -19,7 +19,7 @@ warm call (after a first call that compiles), best of ``REPEATS``, with the
 process CPU time (all threads) beside it: on a shared machine the CPU time is
 the steadier figure, and the load average is printed.
 
-    python -m benchmarks.bench_synthesis            # 1024², as issue 6 asks
+    python -m benchmarks.bench_synthesis            # 1024², the size the target is set at
     python -m benchmarks.bench_synthesis 256        # a quick run
 """
 
@@ -113,10 +113,17 @@ def reference_analyze(rgb, height=HEIGHT, n_quantiles=N_QUANTILES):
         pix_q.append(_ref_quantiles(d[c], probs))
         pyr = _pyr(_ref_periodic(d[c]), height)
         full = d[c].size  # store size-independent values (pyrtools' level-l bands grow by H W / (H_l W_l))
-        band_q.append([_ref_quantiles(pyr.pyr_coeffs[k], probs) * pyr.pyr_coeffs[k].size / full
-                       for k in _ref_keys(height)])
-    return {"mean": mean, "basis": basis, "probs": probs, "pix": np.array(pix_q), "bands": np.array(band_q),
-            "height": height}
+        band_q.append(
+            [_ref_quantiles(pyr.pyr_coeffs[k], probs) * pyr.pyr_coeffs[k].size / full for k in _ref_keys(height)]
+        )
+    return {
+        "mean": mean,
+        "basis": basis,
+        "probs": probs,
+        "pix": np.array(pix_q),
+        "bands": np.array(band_q),
+        "height": height,
+    }
 
 
 def reference_synthesize(model, shape, seed=0, iterations=ITERATIONS, rho_s=RHO_S):
@@ -198,16 +205,22 @@ def main(size: int | None = None) -> None:
     t_ref, c_ref, (img_ref, dist_ref) = _best_of(ref, 1 if size >= 1024 else REPEATS)
     load = tuple(max(a, b) for a, b in zip(load, os.getloadavg()))
 
-    print(f"texture analysis + synthesis, {size}x{size} RGB, height {HEIGHT}, {ITERATIONS} iterations "
-          f"({jax.default_backend()}, {os.cpu_count()} cores, load average up to "
-          f"{load[0]:.2f} {load[1]:.2f} {load[2]:.2f})")
+    print(
+        f"texture analysis + synthesis, {size}x{size} RGB, height {HEIGHT}, {ITERATIONS} iterations "
+        f"({jax.default_backend()}, {os.cpu_count()} cores, load average up to "
+        f"{load[0]:.2f} {load[1]:.2f} {load[2]:.2f})"
+    )
     print(f"{'':24s}{'wall time':>12s}{'CPU time':>11s}{'final KS':>10s}{'var ratio':>11s}")
-    for name, t, c, dist, img in (("pyrtools + NumPy", t_ref, c_ref, dist_ref[-1], img_ref),
-                                  ("wardjax (JAX)", t_ours, c_ours, res.distance[-1], res.image)):
+    for name, t, c, dist, img in (
+        ("pyrtools + NumPy", t_ref, c_ref, dist_ref[-1], img_ref),
+        ("wardjax (JAX)", t_ours, c_ours, res.distance[-1], res.image),
+    ):
         var = float(np.mean(img.var(axis=(0, 1)) / src.var(axis=(0, 1))))
         print(f"{name:24s}{t:11.2f}s{c:10.2f}s{dist:10.3f}{var:11.3f}")
-    print(f"{'ratio (reference / ours)':24s}{t_ref / t_ours:11.1f}x{c_ref / c_ours:10.1f}x   (target >= 10x; "
-          f"wardjax compile: {t_compile - t_ours:.1f} s once per shape)")
+    print(
+        f"{'ratio (reference / ours)':24s}{t_ref / t_ours:11.1f}x{c_ref / c_ours:10.1f}x   (target >= 10x; "
+        f"wardjax compile: {t_compile - t_ours:.1f} s once per shape)"
+    )
 
 
 if __name__ == "__main__":

@@ -44,8 +44,17 @@ from wardjax.ward import WardParams
 
 __all__ = ["DETECTABLE", "CANCELLED", "OUT_OF_LIBRARY", "BenchCase", "simulate_case", "run_bench", "bench_table"]
 
-DETECTABLE = ("saturation", "ambient", "gamma", "illumination_gradient", "fresnel", "anisotropy", "second_lobe",
-              "coloured_specular", "retroreflection")
+DETECTABLE = (
+    "saturation",
+    "ambient",
+    "gamma",
+    "illumination_gradient",
+    "fresnel",
+    "anisotropy",
+    "second_lobe",
+    "coloured_specular",
+    "retroreflection",
+)
 CANCELLED = ("symmetric_falloff", "directional_emission")
 OUT_OF_LIBRARY = "orange_peel"
 RHO_STD = 0.99
@@ -167,8 +176,9 @@ def _measure(v_p, v_s, amb, sc, effect, s, noise, vmax=None):
     return f
 
 
-def simulate_case(hidden: str | None, seed: int, *, n_scanlines: int = 8, n_samples: int = 256,
-                  strength_sigma: float | None = None) -> BenchCase:
+def simulate_case(
+    hidden: str | None, seed: int, *, n_scanlines: int = 8, n_samples: int = 256, strength_sigma: float | None = None
+) -> BenchCase:
     """Simulate one bench case with ``hidden`` (a library effect name, ``"orange_peel"`` or ``None``).
 
     Parameters
@@ -193,8 +203,10 @@ def simulate_case(hidden: str | None, seed: int, *, n_scanlines: int = 8, n_samp
         "ratio": float(np.exp(rng.choice([-1, 1]) * rng.uniform(np.log(2.0), np.log(4.0)))),
         "width": rng.uniform(0.3, 0.8),
         "tint": rng.normal(0, 1, 3) * np.array([1.0, 0.0, 1.0]),
-        "period": rng.uniform(4.0, 8.0), "phase": rng.uniform(0, 2 * np.pi),
-        "yc": rng.uniform(-50, 50), "amb_scale": 1.0,
+        "period": rng.uniform(4.0, 8.0),
+        "phase": rng.uniform(0, 2 * np.pi),
+        "yc": rng.uniform(-50, 50),
+        "amb_scale": 1.0,
     }
     if np.linalg.norm(par["tint"]) < 0.5:
         par["tint"] = par["tint"] / max(np.linalg.norm(par["tint"]), 1e-9) * 0.5
@@ -223,8 +235,11 @@ def simulate_case(hidden: str | None, seed: int, *, n_scanlines: int = 8, n_samp
         elif hidden in CANCELLED:
             s = {"symmetric_falloff": 0.5, "directional_emission": 4.0}[hidden]  # strong, yet cancels
         else:
-            sign = -1.0 if (hidden in ("gamma", "ambient", "illumination_gradient", "anisotropy")
-                            and rng.uniform() < 0.5) else 1.0
+            sign = (
+                -1.0
+                if (hidden in ("gamma", "ambient", "illumination_gradient", "anisotropy") and rng.uniform() < 0.5)
+                else 1.0
+            )
             hi = 1e-3
             while rms(sign * hi) < target and hi < 1e4:
                 hi *= 2.0
@@ -239,11 +254,9 @@ def simulate_case(hidden: str | None, seed: int, *, n_scanlines: int = 8, n_samp
     else:
         vp, vs, amb = _render(sc, hidden, s, par)
         f = _measure(vp, vs, amb, sc, hidden, s, noise)
-    data = scanline_data(f, sc.wi, sc.wo, sigma, points=sc.points, lamp=sc.lamp, kind="ratio",
-                         rho_standard=RHO_STD)
+    data = scanline_data(f, sc.wi, sc.wo, sigma, points=sc.points, lamp=sc.lamp, kind="ratio", rho_standard=RHO_STD)
     truth = {"rho_d": sc.rho_d, "rho_s": sc.rho_s, "alpha": sc.alpha, "strength": s, **par}
-    return BenchCase(data=data, hidden=hidden, strength_sigma=rms(s) if hidden not in (None,) else 0.0,
-                     truth=truth)
+    return BenchCase(data=data, hidden=hidden, strength_sigma=rms(s) if hidden not in (None,) else 0.0, truth=truth)
 
 
 def case_seed(seed: int, hidden: str | None, k: int) -> int:
@@ -252,9 +265,19 @@ def case_seed(seed: int, hidden: str | None, k: int) -> int:
     return 1_000_003 * seed + 10_007 * idx + k
 
 
-def run_bench(n_draws: int = 10, n_null: int = 100, *, effects=DETECTABLE, seed: int = 0, n_scanlines: int = 8,
-              n_samples: int = 256, out_of_library: int = 0, cancelled: int = 0, draws: dict | None = None,
-              progress=None) -> dict:
+def run_bench(
+    n_draws: int = 10,
+    n_null: int = 100,
+    *,
+    effects=DETECTABLE,
+    seed: int = 0,
+    n_scanlines: int = 8,
+    n_samples: int = 256,
+    out_of_library: int = 0,
+    cancelled: int = 0,
+    draws: dict | None = None,
+    progress=None,
+) -> dict:
     """Run ``discover`` blind on hidden-effect and null draws; tabulate.
 
     ``draws`` overrides ``n_draws`` per effect (``{"gamma": 20}``: more draws
@@ -277,12 +300,21 @@ def run_bench(n_draws: int = 10, n_null: int = 100, *, effects=DETECTABLE, seed:
         case = simulate_case(hidden, case_seed(seed, hidden, k), n_scanlines=n_scanlines, n_samples=n_samples)
         t0 = time.perf_counter()
         rep = discover(model, case.data, keep_plot_data=False)
-        rows.append({
-            "hidden": hidden or "none", "draw": k, "strength_sigma": case.strength_sigma,
-            "found": list(rep.found), "first": rep.found[0] if rep.found else "none",
-            "gap_before": rep.gap[0], "gap_after": rep.gap[-1], "n_obs": rep.n_obs,
-            "unexplained": bool(rep.unexplained), "partial": list(rep.partial), "seconds": time.perf_counter() - t0,
-        })
+        rows.append(
+            {
+                "hidden": hidden or "none",
+                "draw": k,
+                "strength_sigma": case.strength_sigma,
+                "found": list(rep.found),
+                "first": rep.found[0] if rep.found else "none",
+                "gap_before": rep.gap[0],
+                "gap_after": rep.gap[-1],
+                "n_obs": rep.n_obs,
+                "unexplained": bool(rep.unexplained),
+                "partial": list(rep.partial),
+                "seconds": time.perf_counter() - t0,
+            }
+        )
         if progress:
             progress(j, len(plan), rows[-1])
     return summarise(rows)
@@ -294,8 +326,12 @@ def summarise(rows: list[dict]) -> dict:
     for r in rows:
         conf.setdefault(r["hidden"], {}).setdefault(r["first"], 0)
         conf[r["hidden"]][r["first"]] += 1
-    named = {h: sum(1 for r in rows if r["hidden"] == h and r["first"] == h) / max(1, sum(
-        1 for r in rows if r["hidden"] == h)) for h in conf if h in DETECTABLE}
+    named = {
+        h: sum(1 for r in rows if r["hidden"] == h and r["first"] == h)
+        / max(1, sum(1 for r in rows if r["hidden"] == h))
+        for h in conf
+        if h in DETECTABLE
+    }
     nulls = [r for r in rows if r["hidden"] == "none"]
     det = [r for r in rows if r["hidden"] in DETECTABLE]
     return {
@@ -313,8 +349,10 @@ def bench_table(summary: dict) -> str:
     """Markdown confusion matrix (rows: hidden, columns: first effect named)."""
     conf = summary["confusion"]
     cols = sorted({c for d in conf.values() for c in d} | {"none"})
-    lines = ["| hidden \\ named first | " + " | ".join(cols) + " | gap before → after (median) |",
-             "|---" * (len(cols) + 2) + "|"]
+    lines = [
+        "| hidden \\ named first | " + " | ".join(cols) + " | gap before → after (median) |",
+        "|---" * (len(cols) + 2) + "|",
+    ]
     for h, d in conf.items():
         rs = [r for r in summary["rows"] if r["hidden"] == h]
         gb = np.median([r["gap_before"] for r in rs])

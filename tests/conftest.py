@@ -1,7 +1,11 @@
-"""Test configuration: strict JAX numerics, seeded generators, shared fixtures.
+"""Test configuration: strict JAX numerics, checked shapes, seeded generators, shared fixtures.
 
 Float64 is *not* switched on globally: the library scopes it itself, and the
-tests check that it does (tests/test_00_api.py).
+tests check that it does (``tests/test_01_ward.py``). Every function of the
+package is imported through jaxtyping's import hook with beartype, so the
+shapes and dtypes written in its type hints are checked on every call the
+suite makes. Rank and dtype promotion are strict: an implicit broadcast of
+ranks or a silent float32 → float64 promotion is an error.
 """
 
 import os
@@ -9,8 +13,13 @@ import os
 import jax
 import numpy as np
 import pytest
+from jaxtyping import install_import_hook
 
 jax.config.update("jax_numpy_rank_promotion", "raise")
+jax.config.update("jax_numpy_dtype_promotion", "strict")
+
+with install_import_hook("wardjax", "_typecheck.typecheck"):
+    import wardjax  # noqa: F401  (imported here, through the hook, before any test imports it)
 # The CLI keeps compiled kernels on disk (a process-wide JAX setting); tests
 # run it in-process, so they leave it off unless a test turns it on itself
 # (tests/test_cli_fit.py checks the cache in a subprocess).

@@ -164,8 +164,9 @@ def test_anisotropy_is_identified_by_the_joint_fit():
 def test_combined_isotropic_matches_the_truth_and_pools_information(iso_fit):
     rng = np.random.default_rng(21)
     s = 40
-    truth = wj.WardParams(rho_d=np.full((s, 3), 0.4), rho_s=np.full(s, 0.05), alpha_x=np.full(s, 0.08),
-                          alpha_y=np.full(s, 0.08))
+    truth = wj.WardParams(
+        rho_d=np.full((s, 3), 0.4), rho_s=np.full(s, 0.05), alpha_x=np.full(s, 0.08), alpha_y=np.full(s, 0.08)
+    )
     data = wj.simulate_scanlines(truth, x_offsets=rng.uniform(-20, 20, s), seed=rng)
     res = wj.fit_scanlines(data.f_r, data.wi, data.wo, weights=1 / data.sigma**2)
     c = res.combined()
@@ -180,8 +181,7 @@ def test_combined_isotropic_matches_the_truth_and_pools_information(iso_fit):
 def test_fast_path_agrees_with_optimistix_reference(iso_fit):
     _, data, fast = iso_fit
     sl = slice(0, 48)
-    ref = wj.fit_scanlines(data.f_r[sl], data.wi[sl], data.wo[sl], weights=1 / data.sigma[sl] ** 2,
-                           solver="optimistix")
+    ref = wj.fit_scanlines(data.f_r[sl], data.wi[sl], data.wo[sl], weights=1 / data.sigma[sl] ** 2, solver="optimistix")
     assert np.all(ref.ok)
     np.testing.assert_allclose(fast.params.alpha_x[sl], ref.params.alpha_x, rtol=1e-6)
     np.testing.assert_allclose(fast.params.rho_s[sl], ref.params.rho_s, rtol=1e-6)
@@ -204,7 +204,8 @@ def test_fast_path_agrees_with_jaxopt_levenberg_marquardt(iso_fit):
         p = wj.WardParams(rho_d=y[:3], rho_s=jnp.exp(y[3]), alpha_x=jnp.exp(y[4]), alpha_y=jnp.exp(y[4]))
         return ((wj.ward_brdf(p, data.wi[i], data.wo[i]) - data.f_r[i]) / sig).ravel()
 
-    with jax.enable_x64(True):
+    # jaxopt's own code mixes bool and float arrays: standard promotion for the cross-check only.
+    with jax.enable_x64(True), jax.numpy_dtype_promotion("standard"):
         y0 = jnp.array([0.3, 0.3, 0.3, np.log(0.05), np.log(0.1)])
         sol = jaxopt.LevenbergMarquardt(residual, maxiter=500, tol=1e-12).run(y0)
         y = np.asarray(sol.params)
@@ -228,8 +229,12 @@ def test_float32_matches_float64(iso_fit):
 def test_other_normalizations_recover_their_own_parameters(normalization):
     rng = np.random.default_rng(31)
     s = 64
-    truth = wj.WardParams(rho_d=rng.uniform(0.1, 0.6, (s, 3)), rho_s=rng.uniform(0.02, 0.08, s),
-                          alpha_x=(a := rng.uniform(0.05, 0.2, s)), alpha_y=a)
+    truth = wj.WardParams(
+        rho_d=rng.uniform(0.1, 0.6, (s, 3)),
+        rho_s=rng.uniform(0.02, 0.08, s),
+        alpha_x=(a := rng.uniform(0.05, 0.2, s)),
+        alpha_y=a,
+    )
     data = wj.simulate_scanlines(truth, x_offsets=rng.uniform(-20, 20, s), normalization=normalization, seed=rng)
     res = wj.fit_scanlines(data.f_r, data.wi, data.wo, weights=1 / data.sigma**2, normalization=normalization)
     assert np.all(res.ok)
@@ -240,8 +245,9 @@ def test_other_normalizations_recover_their_own_parameters(normalization):
 def test_per_scanline_anisotropic_fit_reports_alpha_x_as_weakly_constrained():
     rng = np.random.default_rng(41)
     s = 32
-    truth = wj.WardParams(rho_d=np.full((s, 3), 0.3), rho_s=np.full(s, 0.05), alpha_x=np.full(s, 0.1),
-                          alpha_y=np.full(s, 0.2))
+    truth = wj.WardParams(
+        rho_d=np.full((s, 3), 0.3), rho_s=np.full(s, 0.05), alpha_x=np.full(s, 0.1), alpha_y=np.full(s, 0.2)
+    )
     data = wj.simulate_scanlines(truth, x_offsets=np.linspace(-50, 50, s), seed=rng)
     res = wj.fit_scanlines(data.f_r, data.wi, data.wo, "anisotropic", weights=1 / data.sigma**2)
     good = res.ok
@@ -300,15 +306,20 @@ def test_combined_optimum_does_not_depend_on_the_start():
 
     rng = np.random.default_rng(51)
     s = 24
-    truth = wj.WardParams(rho_d=np.full((s, 3), 0.5) * rng.uniform(0.9, 1.1, (s, 1)), rho_s=np.full(s, 0.04),
-                          alpha_x=np.full(s, 0.137), alpha_y=np.full(s, 0.15))
+    truth = wj.WardParams(
+        rho_d=np.full((s, 3), 0.5) * rng.uniform(0.9, 1.1, (s, 1)),
+        rho_s=np.full(s, 0.04),
+        alpha_x=np.full(s, 0.137),
+        alpha_y=np.full(s, 0.15),
+    )
     data = wj.simulate_scanlines(truth, x_offsets=np.linspace(-80, 80, s), seed=rng)
     res = wj.fit_scanlines(data.f_r, data.wi, data.wo, weights=1 / data.sigma**2)
     fits = []
     for scale in (1.0, 1.6, 0.5):
         p = res.params
-        start = dataclasses.replace(res, params=wj.WardParams(p.rho_d, p.rho_s * scale, p.alpha_x * scale,
-                                                              p.alpha_y * scale))
+        start = dataclasses.replace(
+            res, params=wj.WardParams(p.rho_d, p.rho_s * scale, p.alpha_x * scale, p.alpha_y * scale)
+        )
         fits.append(start.combined("anisotropic"))
     for c in fits:
         assert c.status == wj.Status.CONVERGED
@@ -319,13 +330,16 @@ def test_combined_optimum_does_not_depend_on_the_start():
 
 def _textured(rng, s=32, amplitude=0.0):
     """Scanlines whose ρd varies smoothly along y (a texture the per-scanline ρd cannot absorb)."""
-    truth = wj.WardParams(rho_d=np.full((s, 3), 0.4), rho_s=np.full(s, 0.04), alpha_x=np.full(s, 0.12),
-                          alpha_y=np.full(s, 0.15))
+    truth = wj.WardParams(
+        rho_d=np.full((s, 3), 0.4), rho_s=np.full(s, 0.04), alpha_x=np.full(s, 0.12), alpha_y=np.full(s, 0.15)
+    )
     data = wj.simulate_scanlines(truth, x_offsets=np.linspace(-60, 60, s), seed=rng)
     y = np.linspace(0, 1, data.f_r.shape[1])
     phases = rng.uniform(0, 2 * np.pi, (s, 3))
-    texture = amplitude * (np.sin(2 * np.pi * 3 * y[None, :, None] + phases[:, None, :])
-                           + 0.5 * np.sin(2 * np.pi * 7 * y[None, :, None] + 2 * phases[:, None, :]))
+    texture = amplitude * (
+        np.sin(2 * np.pi * 3 * y[None, :, None] + phases[:, None, :])
+        + 0.5 * np.sin(2 * np.pi * 7 * y[None, :, None] + 2 * phases[:, None, :])
+    )
     f = data.f_r + texture / np.pi  # σ (1 % of the whole signal) is unchanged: the texture is not noise
     return truth, data, f
 
@@ -396,13 +410,15 @@ def test_padded_samples_leave_the_prepared_scanline_unchanged(rng, n):
     tol = 64 * np.finfo(float).eps
     for name in ("wsum", "fbar", "k0", "n_obs", "n_samples", "theta_guess", "grid_wsum", "grid_fsum"):
         # grid_fsum sums centred data (≈ 0): its rounding is relative to Σ w f
-        np.testing.assert_allclose(getattr(padded, name), getattr(plain, name), rtol=tol,
-                                   atol=tol * float(np.sum(w * f)), err_msg=name)
+        np.testing.assert_allclose(
+            getattr(padded, name), getattr(plain, name), rtol=tol, atol=tol * float(np.sum(w * f)), err_msg=name
+        )
     # The grid's streams: the same samples (gwf holds centred data: rounding), then zero-weight slots.
     m = plain.grid_x.shape[-1]
     for name in ("grid_gw", "grid_gwf", "grid_g2w", "grid_x"):
         want = np.asarray(getattr(plain, name))
-        np.testing.assert_allclose(np.asarray(getattr(padded, name))[..., :m], want, rtol=tol,
-                                   atol=tol * np.max(np.abs(want)), err_msg=name)
+        np.testing.assert_allclose(
+            np.asarray(getattr(padded, name))[..., :m], want, rtol=tol, atol=tol * np.max(np.abs(want)), err_msg=name
+        )
     for name in ("grid_gw", "grid_gwf", "grid_g2w"):
         assert not np.any(np.asarray(getattr(padded, name))[..., m:]), name

@@ -10,9 +10,13 @@ def _scene(rng, s=16, n=128):
     texture = rng.uniform(0.1, 0.8, (s, n, 3))
     spec = wj.WardParams(rho_d=np.zeros(3), rho_s=0.05, alpha_x=0.08, alpha_y=0.12)
     data = wj.simulate_scanlines(
-        wj.WardParams(rho_d=np.zeros((s, 3)), rho_s=np.full(s, 0.05), alpha_x=np.full(s, 0.08),
-                      alpha_y=np.full(s, 0.12)),
-        x_offsets=np.linspace(-10, 10, s), n_samples=n, noise_rel=0.0, seed=rng,
+        wj.WardParams(
+            rho_d=np.zeros((s, 3)), rho_s=np.full(s, 0.05), alpha_x=np.full(s, 0.08), alpha_y=np.full(s, 0.12)
+        ),
+        x_offsets=np.linspace(-10, 10, s),
+        n_samples=n,
+        noise_rel=0.0,
+        seed=rng,
     )
     # Add the textured diffuse term per sample: f = ρd(x)/π + specular.
     f = data.f_true + texture / np.pi
@@ -23,8 +27,9 @@ def _scene(rng, s=16, n=128):
 def test_recovers_the_texture_exactly_without_noise(rng, normalization):
     texture = rng.uniform(0.1, 0.8, (8, 64, 3))
     p = wj.WardParams(rho_d=np.zeros((8, 3)), rho_s=np.full(8, 0.05), alpha_x=np.full(8, 0.1), alpha_y=np.full(8, 0.1))
-    data = wj.simulate_scanlines(p, x_offsets=np.zeros(8), n_samples=64, noise_rel=0.0,
-                                 normalization=normalization, seed=rng)
+    data = wj.simulate_scanlines(
+        p, x_offsets=np.zeros(8), n_samples=64, noise_rel=0.0, normalization=normalization, seed=rng
+    )
     f = data.f_true + texture / np.pi
     spec = wj.WardParams(rho_d=np.zeros(3), rho_s=0.05, alpha_x=0.1, alpha_y=0.1)
     got = wj.extract_rho_d(f, data.wi, data.wo, spec, normalization=normalization)
@@ -43,8 +48,9 @@ def test_texture_error_follows_the_noise(rng):
 
 def test_coloured_specular_is_subtracted_per_channel(rng):
     texture = np.full((4, 32, 3), 0.3)
-    p = wj.WardParams(rho_d=np.zeros((4, 3)), rho_s=np.tile([0.9, 0.6, 0.3], (4, 1)), alpha_x=np.full(4, 0.2),
-                      alpha_y=np.full(4, 0.2))
+    p = wj.WardParams(
+        rho_d=np.zeros((4, 3)), rho_s=np.tile([0.9, 0.6, 0.3], (4, 1)), alpha_x=np.full(4, 0.2), alpha_y=np.full(4, 0.2)
+    )
     data = wj.simulate_scanlines(p, x_offsets=np.zeros(4), n_samples=32, noise_rel=0.0, seed=rng)
     spec = wj.WardParams(rho_d=np.zeros(3), rho_s=(0.9, 0.6, 0.3), alpha_x=0.2, alpha_y=0.2)
     got = wj.extract_rho_d(data.f_true + texture / np.pi, data.wi, data.wo, spec)

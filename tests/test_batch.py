@@ -53,8 +53,14 @@ def test_bad_captures_do_not_sink_the_batch(captures, tmp_path):
     assert items[0].error.startswith("capture.toml: missing")
     assert items[2].error == "capture.toml: rig.lamp[1]: Input should be a finite number, got nan"
     out = tmp_path / "out"
-    assert {f.name for f in (out / "good").iterdir()} >= {"params.json", "rho_d.tif", "rho_d.png", "scanline.png",
-                                                          "material.rad", "scanlines.csv"}
+    assert {f.name for f in (out / "good").iterdir()} >= {
+        "params.json",
+        "rho_d.tif",
+        "rho_d.png",
+        "scanline.png",
+        "material.rad",
+        "scanlines.csv",
+    }
     assert not (out / "nan_lamp").exists() and not (out / "empty").exists()
     with open(out / "summary.csv", newline="") as fh:
         rows = list(csv.DictReader(fh))
@@ -72,7 +78,7 @@ def test_find_captures(captures, tmp_path):
 def test_killed_batch_reruns_to_the_uninterrupted_result(captures, tmp_path):
     # The killed run is a separate process with JAX's default settings; run the
     # in-process ones alike (tests/conftest.py raises on rank promotion, which
-    # wardjax.synthesis.analyze_texture, behind texture.json, still relies on).
+    # wardjax.texture.analyze_texture, behind texture.json, still relies on).
     with jax.numpy_rank_promotion("allow"):
         _killed_batch_reruns(captures, tmp_path)
 
@@ -81,8 +87,16 @@ def _killed_batch_reruns(captures, tmp_path):
     ref = tmp_path / "ref"
     run_batch([captures], ref)
     killed = tmp_path / "killed"
-    cmd = [sys.executable, "-c", "from wardjax.run import main; main()", "fit", str(captures), "--out", str(killed),
-           "--quiet"]
+    cmd = [
+        sys.executable,
+        "-c",
+        "from wardjax.run import main; main()",
+        "fit",
+        str(captures),
+        "--out",
+        str(killed),
+        "--quiet",
+    ]
     proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     try:
         deadline = time.monotonic() + 240
@@ -122,4 +136,5 @@ def test_rerun_skips_unless_forced_and_notices_changed_inputs(captures, tmp_path
     toml.write_text(toml.read_text().replace("noise_floor = 0.002", "noise_floor = 0.003"))
     assert not run_batch([changed / "a_desk"], out)[0].skipped
     assert json.loads(pj.read_text())["inputs"]["capture.toml"] != json.loads(
-        (tmp_path / "out" / "a_desk" / "params.json").read_text()).get("never", "x")
+        (tmp_path / "out" / "a_desk" / "params.json").read_text()
+    ).get("never", "x")

@@ -16,8 +16,8 @@ from click.testing import CliRunner
 import wardjax as wj
 from wardjax._files import decode_values, encode_image, encode_values, read_image
 from wardjax.capture import CaptureError, load_capture
-from wardjax.simulate import SensorNoise, write_capture_toml
 from wardjax.run import main
+from wardjax.simulate import SensorNoise, write_capture_toml
 
 PROBE = wj.WardParams(rho_d=(0.5, 0.45, 0.4), rho_s=0.04, alpha_x=0.12, alpha_y=0.12)
 
@@ -106,32 +106,58 @@ BROKEN = {
     "extra_top_level": (_edit(rho_standrad=0.99), "capture.toml", "rho_standrad: unknown field"),
     "mistyped_focal": (_edit(camera__focal_px="wide"), "capture.toml", "camera.focal_px:"),
     "negative_focal": (_edit(camera__focal_px=-5.0), "capture.toml", "camera.focal_px: Input should be greater than 0"),
-    "nan_in_lamp": (_replace_text("lamp = [0.0, 300.0", "lamp = [0.0, nan"), "capture.toml", "rig.lamp[1]: Input should be a finite number"),
-    "inf_in_camera": (_replace_text("camera = [0.0, -300.0, 400.0]", "camera = [0.0, -300.0, inf]"), "capture.toml",
-                      "rig.camera[2]: Input should be a finite number"),
+    "nan_in_lamp": (
+        _replace_text("lamp = [0.0, 300.0", "lamp = [0.0, nan"),
+        "capture.toml",
+        "rig.lamp[1]: Input should be a finite number",
+    ),
+    "inf_in_camera": (
+        _replace_text("camera = [0.0, -300.0, 400.0]", "camera = [0.0, -300.0, inf]"),
+        "capture.toml",
+        "rig.camera[2]: Input should be a finite number",
+    ),
     "nan_noise_floor": (_replace_text("noise_floor = 0.002", "noise_floor = nan"), "capture.toml", "fit.noise_floor:"),
     "short_vector": (_edit(rig__lamp=[0.0, 300.0]), "capture.toml", "rig.lamp"),
-    "lamp_off_plane": (_edit(rig__lamp=[50.0, 300.0, 400.0]), "capture.toml", "rig.lamp: the lamp must lie in the plane x = 0"),
+    "lamp_off_plane": (
+        _edit(rig__lamp=[50.0, 300.0, 400.0]),
+        "capture.toml",
+        "rig.lamp: the lamp must lie in the plane x = 0",
+    ),
     "camera_below": (_edit(rig__camera=[0.0, -300.0, -10.0]), "capture.toml", "rig.camera: the camera must be above"),
     "look_at_is_position": (_edit(camera__look_at=[0.0, -300.0, 400.0]), "capture.toml", "camera.look_at:"),
     "principal_outside": (_edit(camera__principal_point=[500.0, 10.0]), "capture.toml", "camera.principal_point:"),
     "bad_encoding": (_edit(images__encoding="rgb"), "capture.toml", "images.encoding:"),
     "bad_bit_depth": (_edit(images__bit_depth=12), "capture.toml", "images.bit_depth:"),
     "rho_standard_too_big": (_edit(rho_standard=1.5), "capture.toml", "rho_standard"),
-    "probe_wrong_side": (_edit(regions__probe=[-100.0, -3.0, -150.0, 150.0]), "capture.toml", "regions.probe: must lie at x ≥ 0"),
+    "probe_wrong_side": (
+        _edit(regions__probe=[-100.0, -3.0, -150.0, 150.0]),
+        "capture.toml",
+        "regions.probe: must lie at x ≥ 0",
+    ),
     "zero_tangent": (_edit(material__tangent=[0.0, 0.0]), "capture.toml", "material.tangent:"),
     "image_path_escapes": (_edit(images__lit="../lit.png"), "capture.toml", "images.lit:"),
     "missing_image": (_delete("lit.png"), "lit.png", "image file is missing"),
     "missing_dark": (_delete("dark.png"), "dark.png", "image file is missing"),
     "corrupt_image": (_write_bytes("lit.png", b"this is not a PNG file at all"), "lit.png", "cannot read the image"),
     "truncated_image": (_write_bytes("lit.png", lambda b: b[: len(b) // 2]), "lit.png", "cannot read the image"),
-    "unsupported_type": (lambda f: (shutil.copy(f / "lit.png", f / "lit.bmp"), _edit(images__lit="lit.bmp")(f)),
-                         "capture.toml", "images.lit: unsupported image type"),
+    "unsupported_type": (
+        lambda f: (shutil.copy(f / "lit.png", f / "lit.bmp"), _edit(images__lit="lit.bmp")(f)),
+        "capture.toml",
+        "images.lit: unsupported image type",
+    ),
     "dark_size_mismatch": (_write_png("dark.png", lambda f, im: im[:40, :60]), "dark.png", "is 60×40 pixels"),
     "image_size_mismatch": (_edit(camera__image_size=[100, 80]), "lit.png", "camera.image_size = [100, 80]"),
     "bit_depth_mismatch": (_edit(images__bit_depth=16), "lit.png", "images.bit_depth = 16"),
-    "camera_misses_probe": (_edit(camera__look_at=[0.0, -5000.0, 0.0]), "capture.toml", "camera: no pixel of the image sees the probe"),
-    "all_saturated": (_write_png("lit.png", lambda f, im: np.full_like(im, 255)), "lit.png", "every pixel is saturated"),
+    "camera_misses_probe": (
+        _edit(camera__look_at=[0.0, -5000.0, 0.0]),
+        "capture.toml",
+        "camera: no pixel of the image sees the probe",
+    ),
+    "all_saturated": (
+        _write_png("lit.png", lambda f, im: np.full_like(im, 255)),
+        "lit.png",
+        "every pixel is saturated",
+    ),
     "all_dark": (lambda f: shutil.copy(f / "dark.png", f / "lit.png"), "lit.png", "below the noise floor"),
 }
 
@@ -160,8 +186,19 @@ def test_broken_capture_gives_one_clear_error(good, tmp_path, case):
     assert info.value.file == file
 
 
-@pytest.mark.parametrize("case", ["no_capture_toml", "nan_in_lamp", "corrupt_image", "dark_size_mismatch",
-                                  "all_saturated", "all_dark", "camera_misses_probe", "scanline_as_smartphone"])
+@pytest.mark.parametrize(
+    "case",
+    [
+        "no_capture_toml",
+        "nan_in_lamp",
+        "corrupt_image",
+        "dark_size_mismatch",
+        "all_saturated",
+        "all_dark",
+        "camera_misses_probe",
+        "scanline_as_smartphone",
+    ],
+)
 def test_cli_reports_one_line_without_traceback(good, tmp_path, case):
     folder = _make(good, tmp_path, case)
     res = CliRunner().invoke(main, ["fit", str(folder), "--out", str(tmp_path / "out"), "--quiet"])
@@ -197,11 +234,22 @@ def test_srgb_reference_values():
     np.testing.assert_array_equal(encode_image(np.array([0.0, 0.5, 1.0, 2.0]), "linear", 16), [0, 32768, 65535, 65535])
 
 
-@pytest.mark.parametrize(("fmt", "encoding", "bits"), [("png", "linear", 16), ("tif", "srgb", 8), ("tif", "gamma2.2", 16),
-                                                       ("jpg", "srgb", 8)])
+@pytest.mark.parametrize(
+    ("fmt", "encoding", "bits"),
+    [("png", "linear", 16), ("tif", "srgb", 8), ("tif", "gamma2.2", 16), ("jpg", "srgb", 8)],
+)
 def test_formats_round_trip_through_the_loader(tmp_path, fmt, encoding, bits):
-    cap = wj.simulate_capture(PROBE, tmp_path / "c", seed=1, image_size=(48, 36), image_format=fmt, encoding=encoding,
-                              bit_depth=bits, noise=SensorNoise(0.0, 0.0), texture="none")
+    cap = wj.simulate_capture(
+        PROBE,
+        tmp_path / "c",
+        seed=1,
+        image_size=(48, 36),
+        image_format=fmt,
+        encoding=encoding,
+        bit_depth=bits,
+        noise=SensorNoise(0.0, 0.0),
+        texture="none",
+    )
     raw = read_image(tmp_path / "c" / f"lit.{fmt}")
     assert raw.dtype == (np.uint8 if bits == 8 else np.uint16) and raw.shape == (36, 48, 3)
     # Decoding gives back the linear values written, to within half a code (JPEG: its compression error).

@@ -13,8 +13,34 @@ from wardjax.run import main
 
 
 def test_simulate_writes_a_loadable_capture(tmp_path):
-    res = CliRunner().invoke(main, ["simulate", str(tmp_path / "c"), "--rho-d", "0.35", "0.35", "0.35", "--rho-s", "0.013", "--alpha-x", "0.041", "--alpha-y", "0.056", "--encoding", "linear",
-                                    "--bit-depth", "16", "--format", "tif", "--size", "64", "48", "--seed", "4"])
+    res = CliRunner().invoke(
+        main,
+        [
+            "simulate",
+            str(tmp_path / "c"),
+            "--rho-d",
+            "0.35",
+            "0.35",
+            "0.35",
+            "--rho-s",
+            "0.013",
+            "--alpha-x",
+            "0.041",
+            "--alpha-y",
+            "0.056",
+            "--encoding",
+            "linear",
+            "--bit-depth",
+            "16",
+            "--format",
+            "tif",
+            "--size",
+            "64",
+            "48",
+            "--seed",
+            "4",
+        ],
+    )
     assert res.exit_code == 0, res.output + res.stderr
     cap = wj.load_capture(tmp_path / "c")
     assert cap.config.images.encoding == "linear" and cap.config.images.bit_depth == 16
@@ -31,8 +57,9 @@ def test_fit_missing_path_is_one_line(tmp_path):
 def test_fit_keeps_compiled_kernels_between_runs(tmp_path):
     """A second ``wardjax fit`` process reads the compiled kernels the first wrote, with identical results."""
     cap = tmp_path / "c"
-    wj.simulate_capture(wj.WardParams(rho_d=0.4, rho_s=0.03, alpha_x=0.08, alpha_y=0.08), out=cap, seed=2,
-                        image_size=(160, 120))
+    wj.simulate_capture(
+        wj.WardParams(rho_d=0.4, rho_s=0.03, alpha_x=0.08, alpha_y=0.08), out=cap, seed=2, image_size=(160, 120)
+    )
     env = {k: v for k, v in os.environ.items() if k != "WARDJAX_NO_CACHE"}
     cache = tmp_path / "xla"
     outs = []

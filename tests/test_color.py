@@ -1,4 +1,4 @@
-"""wardjax.color: sRGB decoding, Bradford D65→E, robust region mean, ΔE (smartphone paper §3.1, §9.1)."""
+"""wardjax.smartphone (colour): sRGB decoding, Bradford D65→E, robust region mean, ΔE (smartphone paper §3.1, §9.1)."""
 
 import csv
 
@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 
 import wardjax as wj
-from wardjax.smartphone import _color as color
 from wardjax._data import calibration_path
+from wardjax.smartphone import _color as color
 
 
 def _srgb_decode_reference(c):
@@ -23,8 +23,9 @@ def _srgb_decode_reference(c):
 def test_decode_gamma22_and_exact_srgb():
     codes = np.arange(256, dtype=np.uint8)
     np.testing.assert_allclose(color.decode_srgb(codes, "gamma2.2"), (codes / 255.0) ** 2.2, rtol=1e-12)
-    np.testing.assert_allclose(color.decode_srgb(codes, "srgb"), _srgb_decode_reference(codes / 255.0), rtol=1e-10,
-                               atol=1e-12)
+    np.testing.assert_allclose(
+        color.decode_srgb(codes, "srgb"), _srgb_decode_reference(codes / 255.0), rtol=1e-10, atol=1e-12
+    )
     # uint16 and floats mean the same encoded value
     np.testing.assert_allclose(color.decode_srgb(np.array([65535], np.uint16), "srgb"), [1.0])
     np.testing.assert_allclose(color.decode_srgb(np.array([0.5]), "gamma2.2"), [0.5**2.2])
@@ -32,17 +33,23 @@ def test_decode_gamma22_and_exact_srgb():
 
 def test_d65_to_E_matrix_matches_colour_science_bradford():
     m = color.matrix_rgb_D65_to_E()
-    np.testing.assert_allclose(m @ np.ones(3), np.ones(3), atol=1e-12)   # white stays white
+    np.testing.assert_allclose(m @ np.ones(3), np.ones(3), atol=1e-12)  # white stays white
     rng = np.random.default_rng(3)
     rgb = rng.uniform(0.02, 1.0, (50, 3))
     ccs = colour.CCS_ILLUMINANTS["CIE 1931 2 Degree Standard Observer"]
     srgb = colour.RGB_COLOURSPACES["sRGB"].copy()
-    srgb.use_derived_matrix_RGB_to_XYZ = True            # the primaries' NPM, not IEC's rounded matrix
+    srgb.use_derived_matrix_RGB_to_XYZ = True  # the primaries' NPM, not IEC's rounded matrix
     xyz = colour.RGB_to_XYZ(rgb, srgb, apply_cctf_decoding=False)
-    xyz_e = colour.chromatic_adaptation(xyz, colour.xy_to_XYZ(ccs["D65"]), colour.xy_to_XYZ(ccs["E"]),
-                                        method="Von Kries", transform="Bradford")
-    srgb_e = colour.RGB_Colourspace("sRGB E", colour.RGB_COLOURSPACES["sRGB"].primaries, ccs["E"],
-                                    use_derived_matrix_RGB_to_XYZ=True, use_derived_matrix_XYZ_to_RGB=True)
+    xyz_e = colour.chromatic_adaptation(
+        xyz, colour.xy_to_XYZ(ccs["D65"]), colour.xy_to_XYZ(ccs["E"]), method="Von Kries", transform="Bradford"
+    )
+    srgb_e = colour.RGB_Colourspace(
+        "sRGB E",
+        colour.RGB_COLOURSPACES["sRGB"].primaries,
+        ccs["E"],
+        use_derived_matrix_RGB_to_XYZ=True,
+        use_derived_matrix_XYZ_to_RGB=True,
+    )
     expected = colour.XYZ_to_RGB(xyz_e, srgb_e, apply_cctf_encoding=False)
     np.testing.assert_allclose(rgb @ m.T, expected, atol=1e-10)
 
@@ -55,14 +62,14 @@ def test_diffuse_from_srgb_grey_patch_is_the_decoded_code():
     for dec, expect in (("gamma2.2", (180 / 255) ** 2.2), ("srgb", _srgb_decode_reference(180 / 255))):
         rho = wj.diffuse_from_srgb(img, region=(2, 18, 5, 25), decoding=dec)
         assert rho.shape == (3,)
-        np.testing.assert_allclose(rho, expect, rtol=1e-9)   # neutral stays neutral through Bradford
+        np.testing.assert_allclose(rho, expect, rtol=1e-9)  # neutral stays neutral through Bradford
 
 
 def test_diffuse_from_srgb_is_robust_to_specular_specks(rng):
     img = np.clip(rng.normal(120, 3, (40, 40, 3)), 0, 255).astype(np.uint8)
     clean = wj.diffuse_from_srgb(img, region=(0, 40, 0, 40))
     dirty = img.copy()
-    idx = rng.choice(1600, 40, replace=False)     # 2.5 % of pixels are highlights
+    idx = rng.choice(1600, 40, replace=False)  # 2.5 % of pixels are highlights
     dirty.reshape(-1, 3)[idx] = 255
     rho = wj.diffuse_from_srgb(dirty, region=(0, 40, 0, 40))
     plain = color.matrix_rgb_D65_to_E() @ color.decode_srgb(dirty.reshape(-1, 3)).mean(0)
@@ -79,11 +86,13 @@ def test_diffuse_from_srgb_colour_path_against_colour_science(rng):
     ccs = colour.CCS_ILLUMINANTS["CIE 1931 2 Degree Standard Observer"]
     ccs_d65 = colour.xy_to_XYZ(ccs["D65"])
     npm = colour.normalised_primary_matrix(colour.RGB_COLOURSPACES["sRGB"].primaries, ccs["D65"])
-    xyz = colour.cctf_decoding(codes / 255.0, function="sRGB") @ npm.T   # exact sRGB curve, D65
-    xyz_e = colour.chromatic_adaptation(xyz, ccs_d65, colour.xy_to_XYZ(ccs["E"]),
-                                        method="Von Kries", transform="Bradford")
-    np.testing.assert_allclose(rho @ colour.normalised_primary_matrix(colour.RGB_COLOURSPACES["sRGB"].primaries,
-                                                                      ccs["E"]).T, xyz_e, atol=1e-10)
+    xyz = colour.cctf_decoding(codes / 255.0, function="sRGB") @ npm.T  # exact sRGB curve, D65
+    xyz_e = colour.chromatic_adaptation(
+        xyz, ccs_d65, colour.xy_to_XYZ(ccs["E"]), method="Von Kries", transform="Bradford"
+    )
+    np.testing.assert_allclose(
+        rho @ colour.normalised_primary_matrix(colour.RGB_COLOURSPACES["sRGB"].primaries, ccs["E"]).T, xyz_e, atol=1e-10
+    )
 
 
 # ----------------------------------------------------------------------------- bad inputs
@@ -138,9 +147,9 @@ def test_delta_E_reproduces_table_II():
     printed = np.array([float(r["delta_E_ab"]) for r in rows])
     got = wj.delta_E_CIE1976(meas, est)
     assert got.shape == (6,)
-    np.testing.assert_allclose(got, printed, atol=0.006)        # the paper prints 2 decimals
+    np.testing.assert_allclose(got, printed, atol=0.006)  # the paper prints 2 decimals
     de2000 = wj.delta_E_CIE2000(meas, est)
-    assert np.all(de2000 < got)      # CIEDE2000 discounts chroma differences of saturated paints
+    assert np.all(de2000 < got)  # CIEDE2000 discounts chroma differences of saturated paints
 
 
 def test_ciede2000_sharma_reference_pairs():

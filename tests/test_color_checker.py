@@ -14,6 +14,7 @@ import pytest
 from wardjax.smartphone import _color as color
 from wardjax.smartphone._colorchecker import (
     COLORCHECKER_NAMES,
+    _XYZ_of_spectra,
     colorchecker_delta_E,
     colorchecker_patch_regions,
     colorchecker_reference_Lab,
@@ -21,10 +22,9 @@ from wardjax.smartphone._colorchecker import (
     fit_camera_correction,
     simulate_colorchecker_photo,
 )
-from wardjax.smartphone._colorchecker import _XYZ_of_spectra
 
 DATA = Path(__file__).parent / "data" / "colorchecker"
-PAPER_MIN_MEAN_MAX = (1.6, 7.1, 18.8)   # its iPhone 5s photo, section 3.2
+PAPER_MIN_MEAN_MAX = (1.6, 7.1, 18.8)  # its iPhone 5s photo, section 3.2
 WHITE = COLORCHECKER_NAMES.index("white 9.5 (.05 D)")
 NEUTRALS = list(range(WHITE, WHITE + 6))
 
@@ -44,10 +44,11 @@ def _print_table(title, dE_by_column):
 
 def test_simulated_chart_mean_delta_E_below_2_with_exact_srgb():
     ref = colorchecker_reference_Lab("spectra")
-    img, regions = simulate_colorchecker_photo()        # 8-bit JPEG (quality 95) via imageio
+    img, regions = simulate_colorchecker_photo()  # 8-bit JPEG (quality 95) via imageio
     assert img.dtype == np.uint8 and img.ndim == 3
-    dE = {dec: colorchecker_delta_E(colorchecker_rho_d(img, regions, decoding=dec), ref)
-          for dec in ("srgb", "gamma2.2")}
+    dE = {
+        dec: colorchecker_delta_E(colorchecker_rho_d(img, regions, decoding=dec), ref) for dec in ("srgb", "gamma2.2")
+    }
     _print_table("simulated ColorChecker, ΔE*ab (D50) per patch", dE)
     assert dE["srgb"].mean() <= 2.0
     # the paper's γ 2.2 mis-decodes the sRGB toe: it is worse than the exact curve
@@ -69,22 +70,25 @@ def test_simulated_chart_remaining_error_is_the_illuminant_change():
     ideal, regions = simulate_colorchecker_photo(quantize=False)
     eight_bit, _ = simulate_colorchecker_photo(jpeg_quality=None)
     jpeg, _ = simulate_colorchecker_photo()
-    dE = {name: colorchecker_delta_E(colorchecker_rho_d(im, regions, decoding="srgb"), ref)
-          for name, im in (("ideal", ideal), ("8-bit", eight_bit), ("8-bit JPEG", jpeg))}
+    dE = {
+        name: colorchecker_delta_E(colorchecker_rho_d(im, regions, decoding="srgb"), ref)
+        for name, im in (("ideal", ideal), ("8-bit", eight_bit), ("8-bit JPEG", jpeg))
+    }
     # reference = the same spectra seen under D65, Bradford-adapted to D50
     ccs = colour.CCS_ILLUMINANTS["CIE 1931 2 Degree Standard Observer"]
-    xyz65 = _XYZ_of_spectra("D65")        # what the simulated camera saw
-    xyz50 = colour.chromatic_adaptation(xyz65, colour.xy_to_XYZ(ccs["D65"]), colour.xy_to_XYZ(ccs["D50"]),
-                                        method="Von Kries", transform="Bradford")
+    xyz65 = _XYZ_of_spectra("D65")  # what the simulated camera saw
+    xyz50 = colour.chromatic_adaptation(
+        xyz65, colour.xy_to_XYZ(ccs["D65"]), colour.xy_to_XYZ(ccs["D50"]), method="Von Kries", transform="Bradford"
+    )
     ref_cat = colour.XYZ_to_Lab(xyz50, ccs["D50"])
     dE["ideal vs CAT ref"] = colorchecker_delta_E(colorchecker_rho_d(ideal, regions, decoding="srgb"), ref_cat)
     _print_table("simulated ColorChecker: where the error comes from", dE)
     # patches outside the sRGB gamut under D65 (cyan) are clipped by the camera
     out_of_gamut = np.any(colour.XYZ_to_RGB(xyz65, "sRGB", apply_cctf_encoding=False) < 0, axis=-1)
     assert list(np.flatnonzero(out_of_gamut)) == [COLORCHECKER_NAMES.index("cyan")]
-    assert dE["ideal vs CAT ref"][~out_of_gamut].max() < 0.05   # in gamut, the method itself is exact
-    assert dE["ideal vs CAT ref"][out_of_gamut].min() > 2        # gamut clipping: cyan
-    assert dE["ideal"].mean() > 0.75 * dE["8-bit JPEG"].mean()   # most error: illuminant change + clipping
+    assert dE["ideal vs CAT ref"][~out_of_gamut].max() < 0.05  # in gamut, the method itself is exact
+    assert dE["ideal vs CAT ref"][out_of_gamut].min() > 2  # gamut clipping: cyan
+    assert dE["ideal"].mean() > 0.75 * dE["8-bit JPEG"].mean()  # most error: illuminant change + clipping
     assert 0 < dE["8-bit JPEG"].mean() - dE["ideal"].mean() < 0.5  # camera quantisation + JPEG: small
 
 
@@ -97,7 +101,7 @@ def test_camera_correction_on_simulated_chart_held_out():
     before = colorchecker_delta_E(rho[~fit], ref[~fit]).mean()
     after = colorchecker_delta_E(corr.apply(rho[~fit]), ref[~fit]).mean()
     print(f"\nsimulated chart, held-out mean ΔE*ab: {before:.2f} → {after:.2f} (γ {corr.gamma:.3f})")
-    assert after < before and abs(corr.gamma - 1) < 0.05     # nothing to fix in the tone curve
+    assert after < before and abs(corr.gamma - 1) < 0.05  # nothing to fix in the tone curve
 
 
 # ----------------------------------------------------------------------------- the real photo
@@ -107,8 +111,9 @@ def _real_photo():
     img = iio.imread(DATA / "plantcv_source1_img.png")
     with open(DATA / "layout.toml", "rb") as fh:
         lay = tomllib.load(fh)
-    regions = colorchecker_patch_regions(tuple(lay["first_center"]), tuple(lay["pitch"]), tuple(lay["grid"]),
-                                         lay["half_size"], lay["order"])
+    regions = colorchecker_patch_regions(
+        tuple(lay["first_center"]), tuple(lay["pitch"]), tuple(lay["grid"]), lay["half_size"], lay["order"]
+    )
     return img, regions
 
 
@@ -120,7 +125,7 @@ def test_real_photo_layout_hits_the_patches():
     for y0, y1, x0, x1 in regions:
         box = img[y0:y1, x0:x1].reshape(-1, 3).astype(float)
         spreads.append(np.median(np.abs(box - np.median(box, 0)), 0).max())
-    assert max(spreads) <= 4, spreads            # uniform: no box straddles a black gap
+    assert max(spreads) <= 4, spreads  # uniform: no box straddles a black gap
     # the neutral series runs down the first column, white at the top: strictly darker
     y = [color.luminance_from_rho_d(color.diffuse_from_srgb(img, regions[i])) for i in NEUTRALS]
     assert np.all(np.diff(y) < 0)
@@ -129,12 +134,16 @@ def test_real_photo_layout_hits_the_patches():
 def test_real_photo_delta_E_beside_the_paper():
     img, regions = _real_photo()
     ref = colorchecker_reference_Lab("chromaticities")
-    dE = {dec: colorchecker_delta_E(colorchecker_rho_d(img, regions, decoding=dec), ref)
-          for dec in ("gamma2.2", "srgb")}
+    dE = {
+        dec: colorchecker_delta_E(colorchecker_rho_d(img, regions, decoding=dec), ref) for dec in ("gamma2.2", "srgb")
+    }
     _print_table("PlantCV photo, ΔE*ab (D50) per patch vs colour-science's ColorChecker24 (After Nov 2014)", dE)
-    print("min/mean/max   this photo (γ 2.2): "
-          + "/".join(f"{f(dE['gamma2.2']):.1f}" for f in (np.min, np.mean, np.max))
-          + "   paper's iPhone 5s: " + "/".join(f"{v:.1f}" for v in PAPER_MIN_MEAN_MAX))
+    print(
+        "min/mean/max   this photo (γ 2.2): "
+        + "/".join(f"{f(dE['gamma2.2']):.1f}" for f in (np.min, np.mean, np.max))
+        + "   paper's iPhone 5s: "
+        + "/".join(f"{v:.1f}" for v in PAPER_MIN_MEAN_MAX)
+    )
     assert all(np.all(np.isfinite(v)) and v.shape == (24,) for v in dE.values())
     # The white patch is clipped (all channels at 255) — outside what any decoding can recover.
     y0, y1, x0, x1 = regions[WHITE]
@@ -149,9 +158,10 @@ def test_real_photo_tone_curve_is_near_linear_not_srgb():
     """
     img, regions = _real_photo()
     ref_y = color.luminance_from_rho_d(color.Lab_to_diffuse(colorchecker_reference_Lab(), "D50"))
-    idx = NEUTRALS[1:]                                   # white is clipped
-    codes = np.array([img[y0:y1, x0:x1].reshape(-1, 3).mean() for (y0, y1, x0, x1) in
-                      (regions[i] for i in idx)]) / 255.0
+    idx = NEUTRALS[1:]  # white is clipped
+    codes = (
+        np.array([img[y0:y1, x0:x1].reshape(-1, 3).mean() for (y0, y1, x0, x1) in (regions[i] for i in idx)]) / 255.0
+    )
     gamma, log_g = np.polyfit(np.log(codes), np.log(ref_y[idx]), 1)
     print(f"\nPlantCV photo: effective decoding exponent from the neutrals γ = {gamma:.2f} (sRGB ≈ 2.2)")
     assert 0.8 < gamma < 1.4
@@ -165,14 +175,16 @@ def test_real_photo_camera_correction_held_out(split):
     i = np.arange(24)
     fit = (i % 2 == 0) if split == "even/odd" else ((i // 2) % 2 == 0)
     test = ~fit
-    fit[WHITE] = False                                   # clipped: not a valid fitting target
+    fit[WHITE] = False  # clipped: not a valid fitting target
     corr = fit_camera_correction(rho[fit], ref[fit])
     plain = fit_camera_correction(rho[fit], ref[fit], tone=False)
     before = colorchecker_delta_E(rho[test], ref[test])
     after = colorchecker_delta_E(corr.apply(rho[test]), ref[test])
     after_matrix = colorchecker_delta_E(plain.apply(rho[test]), ref[test])
-    print(f"\nPlantCV photo ({split}), held-out mean ΔE*ab: uncorrected {before.mean():.1f},"
-          f" 3×3 only {after_matrix.mean():.1f}, γ + 3×3 {after.mean():.1f} (fitted γ {corr.gamma:.2f});"
-          f" held-out min/mean/max {after.min():.1f}/{after.mean():.1f}/{after.max():.1f}")
+    print(
+        f"\nPlantCV photo ({split}), held-out mean ΔE*ab: uncorrected {before.mean():.1f},"
+        f" 3×3 only {after_matrix.mean():.1f}, γ + 3×3 {after.mean():.1f} (fitted γ {corr.gamma:.2f});"
+        f" held-out min/mean/max {after.min():.1f}/{after.mean():.1f}/{after.max():.1f}"
+    )
     assert after.mean() < 0.5 * before.mean()
-    assert 0.3 < corr.gamma < 0.7           # 2.2 · γ ≈ 1: the near-linear camera, found from held-in patches
+    assert 0.3 < corr.gamma < 0.7  # 2.2 · γ ≈ 1: the near-linear camera, found from held-in patches

@@ -8,10 +8,10 @@ import pytest
 from click.testing import CliRunner
 
 import wardjax as wj
-from wardjax.run import main
 from benchmarks import hidden_effects as bench
 from wardjax.effects import ScanlineModel, ThresholdModel, discover
 from wardjax.effects._real import curet_data, load_curet, table1_threshold_data
+from wardjax.run import main
 
 FAST = ("gamma", "anisotropy", "coloured_specular")
 
@@ -92,11 +92,13 @@ def test_solo_fits_equal_batched_fits(reports, monkeypatch):
             np.testing.assert_allclose(sa.params[k], sb.params[k], rtol=1e-10, atol=1e-12)
             np.testing.assert_allclose(sa.stderr[k], sb.stderr[k], rtol=1e-8)
         assert [c.effect for c in sa.candidates] == [c.effect for c in sb.candidates]
-        np.testing.assert_allclose([c.delta_chi2 for c in sa.candidates], [c.delta_chi2 for c in sb.candidates],
-                                   rtol=1e-8, atol=1e-8)
+        np.testing.assert_allclose(
+            [c.delta_chi2 for c in sa.candidates], [c.delta_chi2 for c in sb.candidates], rtol=1e-8, atol=1e-8
+        )
         # Residuals are computed in float64 from fits equal to 1e-10, so the structure tests agree as closely.
-        np.testing.assert_allclose([c.structure_p for c in sa.candidates], [c.structure_p for c in sb.candidates],
-                                   rtol=1e-6, atol=1e-300)
+        np.testing.assert_allclose(
+            [c.structure_p for c in sa.candidates], [c.structure_p for c in sb.candidates], rtol=1e-6, atol=1e-300
+        )
 
 
 def test_fits_stopped_at_the_step_cap_are_continued_where_they_decide(reports):
@@ -182,8 +184,12 @@ def test_curet_ward_fits_and_discover():
     assert brdf.shape == (61, 205) and ids[0] == 1
     # a Ward fit per sample at its 205 direction pairs (grey in all three channels)
     f = np.repeat(brdf[:, :, None], 3, axis=-1)
-    fit = wj.fit_scanlines(f, np.broadcast_to(wi, (61, 205, 3)), np.broadcast_to(wo, (61, 205, 3)),
-                           weights=1.0 / (0.05 * np.maximum(f, 1e-3)) ** 2)
+    fit = wj.fit_scanlines(
+        f,
+        np.broadcast_to(wi, (61, 205, 3)),
+        np.broadcast_to(wo, (61, 205, 3)),
+        weights=1.0 / (0.05 * np.maximum(f, 1e-3)) ** 2,
+    )
     assert np.mean(np.isfinite(fit.params.alpha_x)) > 0.9
     # the Ward model misses every one of these samples at the estimated noise level
     reps = {}
@@ -227,13 +233,25 @@ def test_discover_rejects_mismatched_inputs():
 def test_full_bench():
     """≥ 10 draws per detectable effect (20 for γ, whose signature the baseline mostly absorbs), ≥ 100 null
     draws, the out-of-library effect, cancelled effects."""
-    s = bench.run_bench(n_draws=10, n_null=100, out_of_library=5, cancelled=2, draws={"gamma": 20},
-                        progress=lambda i, n, r: print(f"[{i + 1}/{n}] {r['hidden']} → {r['found']} gap "
-                                                       f"{r['gap_before']:.3f} → {r['gap_after']:.3f}", flush=True))
+    s = bench.run_bench(
+        n_draws=10,
+        n_null=100,
+        out_of_library=5,
+        cancelled=2,
+        draws={"gamma": 20},
+        progress=lambda i, n, r: print(
+            f"[{i + 1}/{n}] {r['hidden']} → {r['found']} gap {r['gap_before']:.3f} → {r['gap_after']:.3f}", flush=True
+        ),
+    )
     print(bench.bench_table(s))
     print("named first:", {k: round(v, 3) for k, v in s["named_first"].items()}, "pooled", s["named_first_all"])
-    print("null false-addition rate:", s["null_false_rate"], "of", s["n_null"],
-          [r["found"] for r in s["rows"] if r["hidden"] == "none" and r["found"]])
+    print(
+        "null false-addition rate:",
+        s["null_false_rate"],
+        "of",
+        s["n_null"],
+        [r["found"] for r in s["rows"] if r["hidden"] == "none" and r["found"]],
+    )
     print("largest gap after (correctly named):", s["gap_after_max_detectable"])
     for r in s["rows"]:
         if r["hidden"] != "none" and r["first"] != r["hidden"]:

@@ -27,8 +27,19 @@ def _vals(effects, model, data, **over):
 
 def test_library_covers_the_issue():
     names = {e.name for e in LIBRARY}
-    for n in ("saturation", "ambient", "gamma", "illumination_gradient", "directional_emission", "fresnel",
-              "anisotropy", "second_lobe", "coloured_specular", "retroreflection", "contrast_gloss"):
+    for n in (
+        "saturation",
+        "ambient",
+        "gamma",
+        "illumination_gradient",
+        "directional_emission",
+        "fresnel",
+        "anisotropy",
+        "second_lobe",
+        "coloured_specular",
+        "retroreflection",
+        "contrast_gloss",
+    ):
         assert n in names
     assert {e.name for e in library("threshold")} == {"contrast_gloss", "lobe_floor", "ppb_curvature"}
     for e in LIBRARY:
@@ -54,8 +65,11 @@ def test_absent_effects_are_the_identity(small):
     np.testing.assert_allclose(f_all, f_none, rtol=1e-12)
     # ... and the plain prediction is wardjax.ward_brdf with the profiled ρd
     with jax.enable_x64(True):
-        ref = np.asarray(wj.ward_brdf(wj.WardParams(jnp.asarray(np.asarray(rho_none)), 0.05, 0.12, 0.12),
-                                      jnp.asarray(d.wi), jnp.asarray(d.wo)))
+        ref = np.asarray(
+            wj.ward_brdf(
+                wj.WardParams(jnp.asarray(np.asarray(rho_none)), 0.05, 0.12, 0.12), jnp.asarray(d.wi), jnp.asarray(d.wo)
+            )
+        )
     np.testing.assert_allclose(f_none, ref, rtol=1e-12)
     del act_off
 
@@ -66,8 +80,12 @@ def test_anisotropy_hook_matches_rotated_ward(small):
     e = get_effect("anisotropy")
     eta, phi = 0.3, 0.7
     with jax.enable_x64(True):
-        f, rho, _ = m.predict({"model": {"rho_s": 0.05, "alpha": 0.12}, "anisotropy": {"eta": eta, "phi": phi}},
-                              {"anisotropy": jnp.asarray(True)}, (e,), d)
+        f, rho, _ = m.predict(
+            {"model": {"rho_s": 0.05, "alpha": 0.12}, "anisotropy": {"eta": eta, "phi": phi}},
+            {"anisotropy": jnp.asarray(True)},
+            (e,),
+            d,
+        )
         c, s = np.cos(phi), np.sin(phi)
 
         def rot(w):
@@ -79,8 +97,16 @@ def test_anisotropy_hook_matches_rotated_ward(small):
     np.testing.assert_allclose(np.asarray(f), ref, rtol=1e-10)
 
 
-@pytest.mark.parametrize("name,v", [("ambient", {"a": 0.03}), ("ambient", {"a": -0.01}), ("gamma", {"eps": 0.2}),
-                                    ("gamma", {"eps": -0.1}), ("illumination_gradient", {"b": 0.4})])
+@pytest.mark.parametrize(
+    "name,v",
+    [
+        ("ambient", {"a": 0.03}),
+        ("ambient", {"a": -0.01}),
+        ("gamma", {"eps": 0.2}),
+        ("gamma", {"eps": -0.1}),
+        ("illumination_gradient", {"b": 0.4}),
+    ],
+)
 def test_measurement_inverse(small, name, v):
     """unmeasure(measure(f)) = f, and its derivative is the inverse of the forward derivative."""
     m, d = ScanlineModel(), small.data
@@ -210,8 +236,13 @@ def test_capture_clipped_probe_pixels_are_censored_not_dropped(tmp_path):
     np.testing.assert_array_equal(y[cens], c_img[cens])
     # each bound is the clip level: below the true BRDF of its pixel
     with jax.enable_x64(True):
-        truth = np.asarray(wj.ward_brdf(wj.WardParams(jnp.asarray(np.asarray(p.rho_d, float)), 0.02, 0.06, 0.06),
-                                        jnp.asarray(d.wi), jnp.asarray(d.wo)))
+        truth = np.asarray(
+            wj.ward_brdf(
+                wj.WardParams(jnp.asarray(np.asarray(p.rho_d, float)), 0.02, 0.06, 0.06),
+                jnp.asarray(d.wi),
+                jnp.asarray(d.wo),
+            )
+        )
     assert np.all(y[cens] < truth[cens])
     sat = get_effect("saturation")
     assert sat.applicable(d) is None

@@ -1,4 +1,4 @@
-"""wardjax.fresnel: exact Fresnel (dielectrics, conductors), ρs = cosine-weighted mean 0–60°."""
+"""wardjax.smartphone (Fresnel): exact Fresnel (dielectrics, conductors), ρs = cosine-weighted mean 0–60°."""
 
 import jax
 import jax.numpy as jnp
@@ -32,7 +32,7 @@ def test_normal_incidence_conductor_and_grazing():
     with jax.enable_x64(True):
         f0 = float(wj.fresnel_reflectance(1.0, n, k))
         assert f0 == pytest.approx(((n - 1) ** 2 + k**2) / ((n + 1) ** 2 + k**2), rel=1e-12)
-        assert float(wj.fresnel_reflectance(0.0, 1.5)) == pytest.approx(1.0)        # grazing: total
+        assert float(wj.fresnel_reflectance(0.0, 1.5)) == pytest.approx(1.0)  # grazing: total
         assert float(wj.fresnel_reflectance(0.0, n, k)) == pytest.approx(1.0)
 
 
@@ -72,7 +72,7 @@ def test_jit_grad_and_no_global_x64_flip():
     wj.specular_from_fresnel(1.5)
     assert jax.config.jax_enable_x64 == before
     g = jax.grad(lambda n: fresnel.fresnel_reflectance(jnp.asarray(1.0), n))(1.5)
-    assert float(g) == pytest.approx(4 * (1.5 - 1) / (1.5 + 1) ** 3, rel=1e-4)   # d/dn ((n-1)/(n+1))²
+    assert float(g) == pytest.approx(4 * (1.5 - 1) / (1.5 + 1) ** 3, rel=1e-4)  # d/dn ((n-1)/(n+1))²
 
 
 def test_metal_rgb_rho_s():
@@ -80,20 +80,23 @@ def test_metal_rgb_rho_s():
     silver = wj.specular_rgb_metal("silver")
     copper = wj.specular_rgb_metal("copper")
     alu = wj.specular_rgb_metal("aluminium")
-    assert gold[0] > gold[1] > gold[2] and gold[2] < 0.5          # yellow
-    assert copper[0] > copper[1] and copper[0] > copper[2]          # reddish
-    assert np.ptp(silver) < 0.07 and np.ptp(alu) < 0.03             # nearly neutral
-    assert np.all((0.85 < silver) & (silver < 1.0)) and np.all((0.85 < alu) & (alu < 1.0))
+    assert gold[0] > gold[1] > gold[2] and gold[2] < 0.5  # yellow
+    assert copper[0] > copper[1] and copper[0] > copper[2]  # reddish
+    assert np.ptp(silver) < 0.07 and np.ptp(alu) < 0.03  # nearly neutral
+    assert np.all((silver > 0.85) & (silver < 1.0)) and np.all((alu > 0.85) & (alu < 1.0))
     # a spectrally flat conductor gives R = G = B (the colour path keeps white E neutral)
     n, k = fresnel.metal_ior("aluminium", 550.0)
     assert np.allclose(fresnel.specular_rgb_metal("aluminium"), wj.specular_from_fresnel(n, k), atol=0.02)
 
 
-@pytest.mark.parametrize("kwargs, message", [
-    (dict(n=-1.5), "n \\(refractive index\\) must be finite and > 0"),
-    (dict(n=1.5, k=-0.1), "k \\(extinction coefficient\\)"),
-    (dict(n=1.5, max_angle_deg=95.0), "max_angle_deg"),
-])
+@pytest.mark.parametrize(
+    "kwargs, message",
+    [
+        (dict(n=-1.5), "n \\(refractive index\\) must be finite and > 0"),
+        (dict(n=1.5, k=-0.1), "k \\(extinction coefficient\\)"),
+        (dict(n=1.5, max_angle_deg=95.0), "max_angle_deg"),
+    ],
+)
 def test_bad_inputs(kwargs, message):
     with pytest.raises(ValueError, match=message):
         wj.specular_from_fresnel(**kwargs)

@@ -88,8 +88,9 @@ def test_mirror_off_the_standard_or_the_image():
 
 
 def test_overhead_camera_mirror_is_column_reflection():
-    cam = Camera(position=(0.0, 0.0, 500.0), look_at=(0.0, 0.0, 0.0), focal_px=500.0, image_size=(201, 101),
-                 up=(0.0, 1.0, 0.0))
+    cam = Camera(
+        position=(0.0, 0.0, 500.0), look_at=(0.0, 0.0, 0.0), focal_px=500.0, image_size=(201, 101), up=(0.0, 1.0, 0.0)
+    )
     u = np.arange(101.0, 201.0)
     g = pixel_geometry(Rig(lamp=(0.0, 300.0, 400.0), camera=cam), u, np.full_like(u, 50.0))
     np.testing.assert_allclose(g.points[:, 0], u - 100.0, atol=1e-12)  # 1 px = 1 mm at 500 mm, f = 500
@@ -98,7 +99,9 @@ def test_overhead_camera_mirror_is_column_reflection():
 
 def test_irradiance_is_symmetric():
     pts = np.array([[37.0, -12.0, 0.0]])
-    np.testing.assert_allclose(irradiance_factor(pts, (0, 250, 400)), irradiance_factor(mirror_point(pts), (0, 250, 400)))
+    np.testing.assert_allclose(
+        irradiance_factor(pts, (0, 250, 400)), irradiance_factor(mirror_point(pts), (0, 250, 400))
+    )
 
 
 def test_material_frame_rotation():
@@ -123,8 +126,12 @@ def test_band_geometry_is_pixel_geometry(dtype, tol_mm, tol_px):
 
     from wardjax.geometry import band_geometry_jnp, rig_constants
 
-    rig = Rig(lamp=(0.0, 300.0, 400.0), camera=OBLIQUE, probe=(3.0, 120.0, -150.0, 150.0),
-              standard=(-120.0, -3.0, -150.0, 150.0))
+    rig = Rig(
+        lamp=(0.0, 300.0, 400.0),
+        camera=OBLIQUE,
+        probe=(3.0, 120.0, -150.0, 150.0),
+        standard=(-120.0, -3.0, -150.0, 150.0),
+    )
     rows = np.arange(0, 301, 7)
     u, v = np.meshgrid(np.arange(401, dtype=float), rows.astype(float))
     ref = pixel_geometry(rig, u, v)
@@ -133,8 +140,9 @@ def test_band_geometry_is_pixel_geometry(dtype, tol_mm, tol_px):
         k = jnp.asarray(rig_constants(rig, (0.6, 0.8)), dtype)
         r = jnp.asarray(rows, dtype)
         got = jax.tree_util.tree_map(np.asarray, kernel(k, r, width=401, height=301))
-        window = jax.tree_util.tree_map(np.asarray, kernel(k, r, col0=jnp.asarray(150, dtype), width=401,
-                                                           height=301, ncols=100))
+        window = jax.tree_util.tree_map(
+            np.asarray, kernel(k, r, col0=jnp.asarray(150, dtype), width=401, height=301, ncols=100)
+        )
     assert got.points.dtype == dtype and got.points.shape == (len(rows), 401, 3)
     hit = np.isfinite(ref.points[..., 0])
     np.testing.assert_array_equal(np.isfinite(got.points[..., 0]), hit)

@@ -12,8 +12,9 @@ NOTEBOOK = Path(__file__).parents[1] / "notebooks" / "missing_effects.ipynb"
 def test_missing_effects_notebook_runs():
     nb = nbformat.read(NOTEBOOK, as_version=4)
     t0 = time.perf_counter()
-    NotebookClient(nb, timeout=300, kernel_name="python3",
-                   resources={"metadata": {"path": str(NOTEBOOK.parent)}}).execute()
+    NotebookClient(
+        nb, timeout=300, kernel_name="python3", resources={"metadata": {"path": str(NOTEBOOK.parent)}}
+    ).execute()
     elapsed = time.perf_counter() - t0
     outs = [o for c in nb.cells if c.cell_type == "code" for o in c.get("outputs", [])]
     assert not [o for o in outs if o.output_type == "error"]

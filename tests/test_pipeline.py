@@ -1,6 +1,6 @@
 """Round trip: simulated captures → ``wardjax fit`` → the parameters and texture that made them.
 
-Must show (issue 3): 8-bit sRGB and 16-bit linear, isotropic and anisotropic,
+What it must show: 8-bit sRGB and 16-bit linear, isotropic and anisotropic,
 with texture: α, αx, αy within 3 %, ρs within 8 %, ρd texture RMS ≤ 0.01
 against the ground truth over valid pixels.
 """
@@ -17,14 +17,26 @@ import wardjax as wj
 from wardjax.run import main
 
 # The image-based paper's Table 1 (desk, marble), grey ρd.
-T1 = {"desk": wj.WardParams(rho_d=(0.676,) * 3, rho_s=0.039, alpha_x=0.137, alpha_y=0.150),
-      "marble": wj.WardParams(rho_d=(0.348,) * 3, rho_s=0.013, alpha_x=0.041, alpha_y=0.056)}
+T1 = {
+    "desk": wj.WardParams(rho_d=(0.676,) * 3, rho_s=0.039, alpha_x=0.137, alpha_y=0.150),
+    "marble": wj.WardParams(rho_d=(0.348,) * 3, rho_s=0.013, alpha_x=0.041, alpha_y=0.056),
+}
 CASES = {
     # name: (params, texture, encoding, bit depth)
     "desk_aniso_srgb8": (T1["desk"], "wood", "srgb", 8),
     "marble_aniso_linear16": (T1["marble"], "marble", "linear", 16),
-    "iso_wood_linear16": (wj.WardParams(rho_d=(0.6, 0.5, 0.4), rho_s=0.05, alpha_x=0.1, alpha_y=0.1), "wood", "linear", 16),
-    "iso_marble_srgb8": (wj.WardParams(rho_d=(0.35, 0.4, 0.45), rho_s=0.02, alpha_x=0.06, alpha_y=0.06), "marble", "srgb", 8),
+    "iso_wood_linear16": (
+        wj.WardParams(rho_d=(0.6, 0.5, 0.4), rho_s=0.05, alpha_x=0.1, alpha_y=0.1),
+        "wood",
+        "linear",
+        16,
+    ),
+    "iso_marble_srgb8": (
+        wj.WardParams(rho_d=(0.35, 0.4, 0.45), rho_s=0.02, alpha_x=0.06, alpha_y=0.06),
+        "marble",
+        "srgb",
+        8,
+    ),
 }
 
 
@@ -105,8 +117,9 @@ def test_clipped_highlight_is_masked_and_fit_survives(tmp_path):
     # Over-expose 3× so the marble's highlight clips: those pixels are masked, and the fit
     # from the unclipped flanks still finds the lobe.
     p = CASES["iso_marble_srgb8"][0]
-    cap = wj.simulate_capture(p, tmp_path / "clip", seed=5, image_size=(160, 120), texture="marble",
-                              exposure=None, headroom=2.4)
+    cap = wj.simulate_capture(
+        p, tmp_path / "clip", seed=5, image_size=(160, 120), texture="marble", exposure=None, headroom=2.4
+    )
     res = wj.fit_capture(cap)
     assert res.diagnostics["pixels"]["saturated"] > 50
     assert abs(float(res.params.alpha_x) / 0.06 - 1) < 0.05
@@ -126,6 +139,7 @@ def test_round_trip_large(tmp_path):
 # the texture off the fit recovers ρs to 0.01 %; with it, ρs is off by −2.2 … +1.9 % depending on
 # the texture (mean −0.2 σ over 40 textures), while the scanline-clustered sandwich reported
 # ±0.1–0.5 % (RMS z 6.7). The texture-field covariance brings RMS z to 1.26 / 0.91 / 1.21.
+
 
 def _marble_z(tmp: Path, seeds, size=(160, 120)):
     p = T1["marble"]
@@ -161,8 +175,7 @@ def test_marble_without_texture_is_unbiased(tmp_path):
     # The bias check against the controlled variation: the same capture with the texture off
     # (noise and 8-bit sRGB kept) recovers ρs, αx, αy to 0.3 %, within 3 reported σ.
     p = T1["marble"]
-    cap = wj.simulate_capture(p, tmp_path / "flat", seed=1, image_size=(160, 120), texture="none",
-                              model="anisotropic")
+    cap = wj.simulate_capture(p, tmp_path / "flat", seed=1, image_size=(160, 120), texture="none", model="anisotropic")
     res = wj.fit_capture(cap)
     for k in ("rho_s", "alpha_x", "alpha_y"):
         est, true, se = float(getattr(res.params, k)), float(getattr(p, k)), float(getattr(res.stderr, k))
@@ -182,19 +195,25 @@ def test_texture_field_covariance_white_noise_is_model_covariance(rng):
     sigma = 2e-3
     f = np.asarray(data.f_r) + sigma * rng.standard_normal(np.shape(data.f_r))
     fit = wj.fit_scanlines(f, data.wi, data.wo, "isotropic").combined("anisotropic")
-    te = texture_field_covariance(f, np.asarray(data.wi), np.asarray(data.wo), np.arange(len(x0)), fit.params,
-                                  "anisotropic", "ward1992")
+    te = texture_field_covariance(
+        f, np.asarray(data.wi), np.asarray(data.wo), np.arange(len(x0)), fit.params, "anisotropic", "ward1992"
+    )
     a_inv_fit = fit.covariance_model * fit.dof / fit.chi2
     np.testing.assert_allclose(te.information, np.linalg.inv(a_inv_fit), rtol=1e-6)
     # At the true parameters the residual is the noise alone and E[Cov] = σ² A⁻¹ exactly; one draw
     # estimates it to ±20 % here (the influence sits on few samples), the mean of 64 draws to ±3 %.
     wi, wo, cols = np.asarray(data.wi), np.asarray(data.wo), np.arange(len(x0))
     model = np.asarray(data.f_r)
-    covs = [texture_field_covariance(model + sigma * rng.standard_normal(model.shape), wi, wo, cols, truth,
-                                     "anisotropic", "ward1992") for _ in range(64)]
+    covs = [
+        texture_field_covariance(
+            model + sigma * rng.standard_normal(model.shape), wi, wo, cols, truth, "anisotropic", "ward1992"
+        )
+        for _ in range(64)
+    ]
     a_inv = np.linalg.inv(covs[0].information)
-    np.testing.assert_allclose(np.sqrt(np.diag(np.mean([c.covariance for c in covs], axis=0))),
-                               sigma * np.sqrt(np.diag(a_inv)), rtol=0.1)
+    np.testing.assert_allclose(
+        np.sqrt(np.diag(np.mean([c.covariance for c in covs], axis=0))), sigma * np.sqrt(np.diag(a_inv)), rtol=0.1
+    )
 
 
 @pytest.mark.parametrize("dtype", [np.float32, np.float64])
@@ -203,13 +222,13 @@ def test_fused_reconstruction_equals_the_numpy_reference(tmp_path, dtype):
     # program per band; the NumPy references (pixel_geometry, sample_bilinear, reconstruct_brdf)
     # give the same values and masks. Over-exposed, so that clipped pixels are masked too.
     from wardjax.geometry import pixel_geometry, to_material_frame
-    from wardjax.reconstruct import reconstruct_capture
+    from wardjax.reconstruct import reconstruct_brdf, reconstruct_capture, sample_bilinear
     from wardjax.reconstruct._band import _smooth_on
-    from wardjax.reconstruct import reconstruct_brdf, sample_bilinear
 
     p = CASES["iso_marble_srgb8"][0]
-    cap = wj.simulate_capture(p, tmp_path / "c", seed=3, image_size=(96, 72), texture="marble", headroom=2.0,
-                              tangent=(0.8, 0.6))
+    cap = wj.simulate_capture(
+        p, tmp_path / "c", seed=3, image_size=(96, 72), texture="marble", headroom=2.0, tangent=(0.8, 0.6)
+    )
     rec = reconstruct_capture(cap, band_rows=32, dtype=dtype)  # 3 bands, the last one padded
     u, v = np.meshgrid(np.arange(96.0), np.arange(72.0))
     g = pixel_geometry(cap.rig, u, v)
@@ -218,10 +237,17 @@ def test_fused_reconstruction_equals_the_numpy_reference(tmp_path, dtype):
     sig = cap.config.fit.smooth_standard_px
     lit_s, dark_s = _smooth_on(cap.lit, std_mask, sig), _smooth_on(cap.dark, std_mask, sig)
     v_std, clip = sample_bilinear(lit_s, g.mirror_pixels[inp], reduce_max=cap.lit_clipped)
-    f_ref, fl_ref = reconstruct_brdf(cap.lit[inp], cap.dark[inp], v_std, sample_bilinear(dark_s, g.mirror_pixels[inp]),
-                                     cap.rho_standard, on_standard=g.mirror_ok[inp],
-                                     saturated=cap.lit_clipped[inp] | clip, noise_floor=cap.config.fit.noise_floor,
-                                     return_flags=True)
+    f_ref, fl_ref = reconstruct_brdf(
+        cap.lit[inp],
+        cap.dark[inp],
+        v_std,
+        sample_bilinear(dark_s, g.mirror_pixels[inp]),
+        cap.rho_standard,
+        on_standard=g.mirror_ok[inp],
+        saturated=cap.lit_clipped[inp] | clip,
+        noise_floor=cap.config.fit.noise_floor,
+        return_flags=True,
+    )
     assert rec.f_r.dtype == dtype
     np.testing.assert_array_equal(rec.probe, inp)
     fl = np.bitwise_or.reduce(fl_ref, axis=-1)
@@ -246,11 +272,11 @@ def test_binning_censors_a_bin_holding_a_clipped_pixel():
     from wardjax.reconstruct import bin_scanlines as _bin_scanlines
 
     nan = np.nan
-    f = np.array([[1.0, 2.0, 5.0, nan, 1.0, nan, 3.0, nan],
-                  [3.0, nan, 1.0, nan, nan, nan, nan, nan]])  # 2 × 8 pixels, bins of 2 × 2
-    clip = np.array([[nan, nan, nan, 9.0, nan, nan, nan, nan],
-                     [nan, nan, nan, nan, nan, nan, nan, 7.0]])
-    rgb = lambda a: np.repeat(a[..., None], 3, -1)  # noqa: E731
+    f = np.array(
+        [[1.0, 2.0, 5.0, nan, 1.0, nan, 3.0, nan], [3.0, nan, 1.0, nan, nan, nan, nan, nan]]
+    )  # 2 × 8 pixels, bins of 2 × 2
+    clip = np.array([[nan, nan, nan, 9.0, nan, nan, nan, nan], [nan, nan, nan, nan, nan, nan, nan, 7.0]])
+    rgb = lambda a: np.repeat(a[..., None], 3, -1)
     wi = np.broadcast_to([0.0, 0.6, 0.8], (2, 8, 3)).copy()
     pts = np.zeros((2, 8, 3))
     rec = Reconstruction(rgb(f), np.zeros((2, 8), np.uint8), wi, wi, pts, np.ones((2, 8), bool), rgb(clip))
@@ -273,8 +299,10 @@ def _two_captures_of_one_rig(tmp_path):
     p = CASES["iso_marble_srgb8"][0]
     base = default_rig((96, 72))
     moved = dataclasses.replace(base, probe=(6.0, 120.0, -148.0, 150.0), standard=(-119.0, -3.0, -150.0, 149.0))
-    return [wj.simulate_capture(p, tmp_path / f"c{i}", seed=i, rig=r, texture="marble", headroom=2.0)
-            for i, r in enumerate((base, moved))]
+    return [
+        wj.simulate_capture(p, tmp_path / f"c{i}", seed=i, rig=r, texture="marble", headroom=2.0)
+        for i, r in enumerate((base, moved))
+    ]
 
 
 def test_captures_of_one_rig_share_one_compiled_reconstruction(tmp_path, monkeypatch):
@@ -283,7 +311,6 @@ def test_captures_of_one_rig_share_one_compiled_reconstruction(tmp_path, monkeyp
     # each (seconds per compile on a real image), and reconstruct what the unpadded kernel does.
     from wardjax import _shapes
     from wardjax.reconstruct import _band
-    from wardjax.run import _fit_capture
 
     caps = _two_captures_of_one_rig(tmp_path)
     bucket = _shapes.bucket
@@ -294,7 +321,7 @@ def test_captures_of_one_rig_share_one_compiled_reconstruction(tmp_path, monkeyp
         recs = [_band.reconstruct_capture(c, clip_bounds=True) for c in caps]
         return recs, _band._reconstruct_band._cache_size()
 
-    exact, n_exact = reconstruct(lambda n: n)
+    exact, n_exact = reconstruct(lambda n: int(n))  # no bucketing; an int, as bucket returns
     padded, n_padded = reconstruct(bucket)
     assert n_exact == 2 and n_padded == 1
     assert not np.array_equal(exact[0].probe, exact[1].probe)
@@ -310,8 +337,19 @@ def test_captures_of_one_rig_share_one_compiled_reconstruction(tmp_path, monkeyp
 def test_bucket_sizes():
     from wardjax._shapes import bucket as _bucket
 
-    assert [_bucket(n) for n in (1, 8, 9, 33, 59, 64, 65, 300, 512, 513, 3000)] == \
-        [8, 8, 16, 40, 64, 64, 80, 320, 512, 640, 3072]
+    assert [_bucket(n) for n in (1, 8, 9, 33, 59, 64, 65, 300, 512, 513, 3000)] == [
+        8,
+        8,
+        16,
+        40,
+        64,
+        64,
+        80,
+        320,
+        512,
+        640,
+        3072,
+    ]
     n = np.arange(1, 5000)
     m = np.array([_bucket(int(k)) for k in n])
     assert np.all(m >= n) and np.all(m <= np.maximum(1.25 * n, n + 7))
@@ -331,7 +369,7 @@ class _Compiles:
         pattern = re.compile(r"Finished XLA compilation of (.+?) in ")
 
         class Handler(logging.Handler):
-            def emit(h, record):  # noqa: N805
+            def emit(h, record):
                 m = pattern.search(record.getMessage())
                 if m:
                     self.names.append(m.group(1))
@@ -357,7 +395,6 @@ def test_captures_of_one_rig_share_every_compiled_program_of_the_fit(tmp_path, m
     import jax
 
     from wardjax import _shapes
-    from wardjax.reconstruct import _band
     from wardjax.run import _fit_capture
 
     caps = _two_captures_of_one_rig(tmp_path)
@@ -371,11 +408,12 @@ def test_captures_of_one_rig_share_every_compiled_program_of_the_fit(tmp_path, m
             second = _fit_capture.fit_capture(caps[1])
         return (first, second), c.names
 
-    exact, compiled_exact = fit(lambda n: n)
+    exact, compiled_exact = fit(lambda n: int(n))  # no bucketing; an int, as bucket returns
     padded, compiled_padded = fit(bucket)
     assert compiled_padded == []
-    assert len(compiled_exact) > 10 and {"jit(_extract)", "jit(_geometry_chunk)", "jit(_solve_joint)"} <= \
-        set(compiled_exact)
+    assert len(compiled_exact) > 10 and {"jit(_extract)", "jit(_geometry_chunk)", "jit(_solve_joint)"} <= set(
+        compiled_exact
+    )
     assert exact[0].scanlines.params.rho_s.shape != exact[1].scanlines.params.rho_s.shape  # the shapes differ
 
     # Padded samples carry zero weight, so only the order of the sums changes: rounding. An optimum's location
@@ -388,8 +426,13 @@ def test_captures_of_one_rig_share_every_compiled_program_of_the_fit(tmp_path, m
         for fa, fb in ((a.combined, b.combined), (a.radiance, b.radiance)):
             for what in ("params", "stderr"):
                 for name in ("rho_d", "rho_s", "alpha_x", "alpha_y"):
-                    np.testing.assert_allclose(getattr(getattr(fb, what), name), getattr(getattr(fa, what), name),
-                                               rtol=np.sqrt(eps), atol=0, err_msg=f"{what}.{name}")
+                    np.testing.assert_allclose(
+                        getattr(getattr(fb, what), name),
+                        getattr(getattr(fa, what), name),
+                        rtol=np.sqrt(eps),
+                        atol=0,
+                        err_msg=f"{what}.{name}",
+                    )
             np.testing.assert_allclose(fb.covariance, fa.covariance, rtol=np.sqrt(eps), atol=0)
             np.testing.assert_allclose(fb.chi2, fa.chi2, rtol=16 * eps, atol=0)
             assert fb.dof == fa.dof and fb.n_scanlines == fa.n_scanlines

@@ -1,4 +1,4 @@
-"""wardjax.psychophysics: PPB↔CPD, gratings, the Table-1 α model, the emcee posterior."""
+"""wardjax.smartphone: PPB↔CPD, gratings, the Table-1 α model, the emcee posterior."""
 
 import imageio.v3 as iio
 import numpy as np
@@ -7,16 +7,15 @@ from click.testing import CliRunner
 
 import wardjax as wj
 from wardjax import smartphone as ps
-from wardjax.smartphone._alpha_posterior import _problem_arrays, _batched, _initial_walkers
 from wardjax.run import main
-
+from wardjax.smartphone._alpha_posterior import _batched, _initial_walkers, _problem_arrays
 
 # ----------------------------------------------------------------------------- geometry
 
 
 def test_ppb_to_cpd_paper_setup():
     cpd = wj.ppb_to_cpd([1, 120], "iphone5s", "paper")
-    assert cpd[0] == pytest.approx(54.3, rel=0.005)          # the paper prints 54.2 in §5
+    assert cpd[0] == pytest.approx(54.3, rel=0.005)  # the paper prints 54.2 in §5
     # 0.4529: within 0.5 % of 0.45 at the printed precision (0.45 ± 0.005 → ±1.1 %)
     assert round(float(cpd[1]), 2) == 0.45 and cpd[1] == pytest.approx(0.45, rel=0.0065)
     np.testing.assert_allclose(wj.cpd_to_ppb(cpd), [1, 120], rtol=1e-12)
@@ -29,10 +28,10 @@ def test_other_geometries():
     near = ps.Viewing("near", eye_to_screen_mm=250.0)
     oblique = ps.Viewing("oblique", eye_to_screen_mm=19.1 * 25.4, screen_obliquity_deg=60.0)
     base = wj.ppb_to_cpd(10)
-    assert wj.ppb_to_cpd(10, viewing=near) < base                       # closer: coarser in angle
-    assert wj.ppb_to_cpd(10, viewing=oblique) == pytest.approx(2 * base, rel=1e-3)   # cos 60° foreshortening
+    assert wj.ppb_to_cpd(10, viewing=near) < base  # closer: coarser in angle
+    assert wj.ppb_to_cpd(10, viewing=oblique) == pytest.approx(2 * base, rel=1e-3)  # cos 60° foreshortening
     retina = ps.Display("hi", ppi=652.0, width_px=10, height_px=10)
-    assert wj.ppb_to_cpd(2, display=retina) == pytest.approx(base * 10, rel=1e-3)   # same period in mm as 1 PPB
+    assert wj.ppb_to_cpd(2, display=retina) == pytest.approx(base * 10, rel=1e-3)  # same period in mm as 1 PPB
     with pytest.raises(ValueError, match="ppb must be > 0"):
         wj.ppb_to_cpd(0)
     with pytest.raises(ValueError, match="display must be one of"):
@@ -47,7 +46,7 @@ def test_grating_image_and_cli(tmp_path):
     assert res.exit_code == 0, res.output
     files = sorted((tmp_path / "g").glob("grating_*.png"))
     assert len(files) == 120
-    im = iio.imread(files[6])                  # 7 PPB
+    im = iio.imread(files[6])  # 7 PPB
     assert im.shape == (1136, 640)
     np.testing.assert_array_equal(im[0, :28], [255] * 7 + [0] * 7 + [255] * 7 + [0] * 7)
     lines = (tmp_path / "g" / "gratings.csv").read_text().splitlines()
@@ -74,16 +73,21 @@ def test_lightness_interpolation_between_anchors():
     mid = am.alpha(20, 0.35)
     lo, hi = am.alpha(20, t["rho_d"][2]), am.alpha(20, t["rho_d"][1])
     assert min(lo, hi) <= mid <= max(lo, hi)
-    assert am.alpha(20, 0.99) == pytest.approx(am.alpha(20, t["rho_d"][0]))      # held beyond the ends
+    assert am.alpha(20, 0.99) == pytest.approx(am.alpha(20, t["rho_d"][0]))  # held beyond the ends
     np.testing.assert_allclose(am.ppb_for_alpha(am.alpha(37.0, 0.6), 0.6), 37.0)
 
 
 def test_physical_lines_r2_and_sd_to_alpha_scale():
     phys = ps.physical_lines()
-    print("\nPPB→SD lines, gloss 95–30: R² =", np.round(phys.r2, 4),
-          " SD→α scale (per degree) =", np.round(phys.sd_to_alpha, 5),
-          " σ_obs (log PPB, per observer) =", round(phys.sigma_obs, 3))
-    assert np.all(phys.r2 > 0.96)                               # the paper's claim
+    print(
+        "\nPPB→SD lines, gloss 95–30: R² =",
+        np.round(phys.r2, 4),
+        " SD→α scale (per degree) =",
+        np.round(phys.sd_to_alpha, 5),
+        " σ_obs (log PPB, per observer) =",
+        round(phys.sigma_obs, 3),
+    )
+    assert np.all(phys.r2 > 0.96)  # the paper's claim
     assert np.all(phys.slope > 0)
     # α per degree of lobe SD: below π/180 (an SD in reflected-angle degrees, not half-angle)
     assert np.all((0.5 * np.pi / 180 < phys.sd_to_alpha) & (phys.sd_to_alpha < np.pi / 180))
@@ -99,6 +103,7 @@ def test_physical_lines_r2_and_sd_to_alpha_scale():
 def test_jax_log_prob_matches_numpy_reference(rng):
     am = wj.AlphaModel.from_calibration()
     import jax
+
     for ppb, mean in (([18, 17, 19], None), ([1, 2], None), ([120], None), (None, 17.3)):
         data, hyper = _problem_arrays(am, [None if ppb is None else np.array(ppb, float)], [mean], [3], [0.5])
         theta = _initial_walkers(data, hyper, 16, rng, scale=5.0)
@@ -136,7 +141,7 @@ def test_posterior_from_a_published_mean_is_wider_than_from_individuals():
     one = am.posterior(ppb_mean=17.33, n_observers=1, rho_d=0.3, seed=1)
     assert abs(mean.median - ind.median) < 0.25 * ind.std + 0.002
     width = {k: np.subtract(*p.interval(0.95)[::-1]) for k, p in (("ind", ind), ("mean", mean), ("one", one))}
-    assert width["one"] > width["mean"]         # more observers, narrower
+    assert width["one"] > width["mean"]  # more observers, narrower
 
 
 def test_posterior_refuses_unconverged_chain():
@@ -145,19 +150,22 @@ def test_posterior_refuses_unconverged_chain():
         am.posterior(ppb=[18], rho_d=0.5, seed=0, burn=50, chunk=100, max_steps=100)
 
 
-@pytest.mark.parametrize("kwargs, err, message", [
-    (dict(ppb=[18, -2], rho_d=0.5), ValueError, "grating set 1..120"),
-    (dict(ppb=[0], rho_d=0.5), ValueError, "grating set 1..120"),
-    (dict(ppb=[17.5], rho_d=0.5), ValueError, "whole pixels"),
-    (dict(ppb=[True], rho_d=0.5), TypeError, "integer"),
-    (dict(ppb=[], rho_d=0.5), ValueError, "non-empty"),
-    (dict(ppb=[18], rho_d=1.5), ValueError, "rho_d must lie in \\[0, 1\\]"),
-    (dict(ppb=[18], rho_d=(0.5, 0.5)), ValueError, "scalar or RGB"),
-    (dict(ppb=[18], ppb_mean=18.0, n_observers=1, rho_d=0.5), ValueError, "not both"),
-    (dict(ppb_mean=18.0, rho_d=0.5), ValueError, "n_observers must be a positive integer"),
-    (dict(ppb_mean=18.0, n_observers=2.5, rho_d=0.5), ValueError, "n_observers must be a positive integer"),
-    (dict(ppb_mean=-3.0, n_observers=2, rho_d=0.5), ValueError, "ppb_mean must be a positive"),
-])
+@pytest.mark.parametrize(
+    "kwargs, err, message",
+    [
+        (dict(ppb=[18, -2], rho_d=0.5), ValueError, "grating set 1..120"),
+        (dict(ppb=[0], rho_d=0.5), ValueError, "grating set 1..120"),
+        (dict(ppb=[17.5], rho_d=0.5), ValueError, "whole pixels"),
+        (dict(ppb=[True], rho_d=0.5), TypeError, "integer"),
+        (dict(ppb=[], rho_d=0.5), ValueError, "non-empty"),
+        (dict(ppb=[18], rho_d=1.5), ValueError, "rho_d must lie in \\[0, 1\\]"),
+        (dict(ppb=[18], rho_d=(0.5, 0.5)), ValueError, "scalar or RGB"),
+        (dict(ppb=[18], ppb_mean=18.0, n_observers=1, rho_d=0.5), ValueError, "not both"),
+        (dict(ppb_mean=18.0, rho_d=0.5), ValueError, "n_observers must be a positive integer"),
+        (dict(ppb_mean=18.0, n_observers=2.5, rho_d=0.5), ValueError, "n_observers must be a positive integer"),
+        (dict(ppb_mean=-3.0, n_observers=2, rho_d=0.5), ValueError, "ppb_mean must be a positive"),
+    ],
+)
 def test_bad_posterior_inputs(kwargs, err, message):
     am = wj.AlphaModel.from_calibration()
     with pytest.raises(err, match=message):

@@ -31,8 +31,9 @@ def test_masks_each_reason():
     v_std = np.array([[0.3] * 3, [0.3] * 3, [0.3] * 3, [0.3] * 3, [0.1005] * 3, [0.3] * 3])
     v_std_bg = np.full_like(v, 0.1)
     on = np.array([True, True, False, True, True, True])
-    f, flags = reconstruct_brdf(v, v_bg, v_std, v_std_bg, on_standard=on, saturation=0.999, noise_floor=0.002,
-                                return_flags=True)
+    f, flags = reconstruct_brdf(
+        v, v_bg, v_std, v_std_bg, on_standard=on, saturation=0.999, noise_floor=0.002, return_flags=True
+    )
     assert flags.dtype == np.uint8 and flags.shape == (6, 3)
     np.testing.assert_array_equal(flags[0], [0, 0, 0])
     np.testing.assert_allclose(f[0], 0.4 / 0.2 * 0.99 / np.pi)
@@ -50,8 +51,15 @@ def test_masks_each_reason():
 
 
 def test_known_saturated_mask_and_combined_reasons():
-    f, flags = reconstruct_brdf([[0.5] * 3], [[0.1] * 3], [[0.3] * 3], [[0.1] * 3], saturated=np.array([True]),
-                                on_standard=np.array([False]), return_flags=True)
+    f, flags = reconstruct_brdf(
+        [[0.5] * 3],
+        [[0.1] * 3],
+        [[0.3] * 3],
+        [[0.1] * 3],
+        saturated=np.array([True]),
+        on_standard=np.array([False]),
+        return_flags=True,
+    )
     np.testing.assert_array_equal(flags[0], [MaskReason.SATURATED | MaskReason.OFF_STANDARD] * 3)
     assert np.isnan(f).all()
 
@@ -72,8 +80,9 @@ def test_bilinear_by_hand():
     img[..., 0] = [[0.0, 1.0, 2.0], [10.0, 11.0, 12.0]]
     clip = np.zeros((2, 3, 1), bool)
     clip[1, 2] = True
-    out, anyclip = sample_bilinear(img, np.array([[0.5, 0.25], [2.0, 1.0], [1.5, 0.0], [3.5, 0.0], [np.nan, 0]]),
-                                   reduce_max=clip)
+    out, anyclip = sample_bilinear(
+        img, np.array([[0.5, 0.25], [2.0, 1.0], [1.5, 0.0], [3.5, 0.0], [np.nan, 0]]), reduce_max=clip
+    )
     # (0.5, 0.25): row 0 → 0.5, row 1 → 10.5; 0.75·0.5 + 0.25·10.5 = 3.0
     np.testing.assert_allclose(out[:3, 0], [3.0, 12.0, 1.5])
     assert np.isnan(out[3:, 0]).all()

@@ -79,8 +79,7 @@ def test_published_mean_form(tmp_path):
 BAD = {
     "non_integer_ppb": (dict(thresholds={"ppb": [10, 11.5, 12]}), "capture.toml", "thresholds.ppb"),
     "negative_ppb": (dict(thresholds={"ppb": [-3, 11]}), "capture.toml", "thresholds.ppb"),
-    "both_forms": (dict(thresholds={"ppb": [11], "ppb_mean": 11.0, "n_observers": 1}), "capture.toml",
-                   "either ppb"),
+    "both_forms": (dict(thresholds={"ppb": [11], "ppb_mean": 11.0, "n_observers": 1}), "capture.toml", "either ppb"),
     "mean_without_count": (dict(thresholds={"ppb_mean": 11.0}), "capture.toml", "needs n_observers"),
     "empty_region": (dict(photo__region=[20, 20, 30, 100]), "capture.toml", "photo.region"),
     "region_outside": (dict(photo__region=[20, 80, 30, 500]), "capture.toml", "photo.region"),

@@ -24,6 +24,7 @@ import os
 import tempfile
 from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -89,13 +90,13 @@ def remove_temporaries(folder) -> None:
             tmp.unlink(missing_ok=True)
 
 
-def write_bytes_atomic(path, data: bytes) -> None:
+def write_bytes_atomic(path, data: bytes | bytearray) -> None:
     """Write ``data`` to ``path`` atomically."""
     with atomic_path(path) as tmp:
         tmp.write_bytes(data)
 
 
-def jsonable(x):
+def jsonable(x) -> Any:
     """``x`` with NumPy scalars and arrays as plain Python, non-finite floats as ``None``."""
     if isinstance(x, dict):
         return {str(k): jsonable(v) for k, v in x.items()}
@@ -115,8 +116,11 @@ def jsonable(x):
 
 def write_json_atomic(path, obj, *, compact: bool = False) -> None:
     """Write JSON (NaN/inf as ``null``) so that a reader never sees a half-written file."""
-    text = json.dumps(jsonable(obj), separators=(",", ":")) if compact else json.dumps(
-        jsonable(obj), indent=2, ensure_ascii=False)
+    text = (
+        json.dumps(jsonable(obj), separators=(",", ":"))
+        if compact
+        else json.dumps(jsonable(obj), indent=2, ensure_ascii=False)
+    )
     write_bytes_atomic(path, (text + "\n").encode())
 
 
@@ -132,7 +136,7 @@ def sha256(path) -> str:
 # --------------------------------------------------------------------------- encodings
 
 
-def decode_values(c, encoding: str) -> np.ndarray:
+def decode_values(c, encoding: str) -> np.ndarray | np.floating:
     """Encoded values in [0, 1] → linear, for ``"srgb"`` (IEC 61966-2-1), ``"gamma2.2"``, ``"linear"``."""
     c = np.asarray(c, np.float64)
     if encoding == "srgb":
@@ -146,7 +150,7 @@ def decode_values(c, encoding: str) -> np.ndarray:
     raise ValueError(f"encoding={encoding!r} is not one of 'srgb', 'gamma2.2', 'linear'")
 
 
-def encode_values(x, encoding: str) -> np.ndarray:
+def encode_values(x, encoding: str) -> np.ndarray | np.floating:
     """Linear values in [0, 1] (clipped) → encoded, the inverse of :func:`decode_values`."""
     x = np.clip(np.asarray(x, np.float64), 0.0, 1.0)
     if encoding == "srgb":
@@ -164,7 +168,7 @@ def decode_lut(encoding: str, bit_depth: int) -> np.ndarray:
     """The linear float32 value of every ``bit_depth``-bit code in ``encoding``."""
     n = 1 << bit_depth
     c = np.arange(n, dtype=np.float64) / (n - 1)
-    return decode_values(c, encoding).astype(np.float32)
+    return np.asarray(decode_values(c, encoding), np.float32)  # c is an array: so is the result
 
 
 def decode_image(codes: np.ndarray, encoding: str, bit_depth: int) -> np.ndarray:
@@ -203,8 +207,9 @@ def read_image(path) -> np.ndarray:
         import rawpy
 
         with rawpy.imread(str(path)) as raw:
-            img = raw.postprocess(gamma=(1, 1), no_auto_bright=True, output_bps=16, use_camera_wb=True,
-                                  output_color=rawpy.ColorSpace.sRGB)
+            img = raw.postprocess(
+                gamma=(1, 1), no_auto_bright=True, output_bps=16, use_camera_wb=True, output_color=rawpy.ColorSpace.sRGB
+            )
     elif suffix == ".png":
         import imagecodecs  # Pillow (imageio's default) reduces 16-bit RGB PNG to 8 bits
 

@@ -9,10 +9,13 @@ masked out (zero weight, NaN values) or sliced off.
 
 from __future__ import annotations
 
+import operator
+from typing import SupportsIndex
+
 import numpy as np
 
 
-def bucket(n: int) -> int:
+def bucket(n: SupportsIndex) -> int:
     """The size a compiled kernel is padded to: the smallest ``m ≥ n`` on the ladder ``2^j · {5, 6, 7, 8}/4``.
 
     For ``2^j < n ≤ 2^(j+1)``, ``m`` is ``n`` rounded up to a multiple of
@@ -20,15 +23,16 @@ def bucket(n: int) -> int:
     standard sit in slightly different places share one compiled program
     instead of compiling (seconds) once per capture.
     """
-    n = max(int(n), 1)
+    n = max(operator.index(n), 1)
     q = max(1 << max((n - 1).bit_length() - 3, 0), 8)
     return -(-n // q) * q
 
 
-def pad_to_shape(a: np.ndarray, shape: tuple[int, ...], fill=0) -> np.ndarray:
+def pad_to_shape(a: np.ndarray, shape: tuple[SupportsIndex, ...], fill: float | int = 0) -> np.ndarray:
     """``a`` padded with ``fill`` at the end of its leading axes to ``shape``."""
     a = np.asarray(a)
     if a.shape[: len(shape)] == tuple(shape):
         return a
-    return np.pad(a, [(0, t - n) for t, n in zip(shape, a.shape)] + [(0, 0)] * (a.ndim - len(shape)),
-                  constant_values=fill)
+    return np.pad(
+        a, [(0, t - n) for t, n in zip(shape, a.shape)] + [(0, 0)] * (a.ndim - len(shape)), constant_values=fill
+    )

@@ -29,6 +29,7 @@ from __future__ import annotations
 import dataclasses
 from typing import NamedTuple
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 
@@ -140,10 +141,10 @@ class Rig:
     standard: tuple[float, float, float, float] | None = None
 
     def probe_box(self) -> tuple[float, float, float, float]:
-        return tuple(self.probe) if self.probe is not None else (0.0, np.inf, -np.inf, np.inf)
+        return (*self.probe,) if self.probe is not None else (0.0, np.inf, -np.inf, np.inf)
 
     def standard_box(self) -> tuple[float, float, float, float]:
-        return tuple(self.standard) if self.standard is not None else (-np.inf, 0.0, -np.inf, np.inf)
+        return (*self.standard,) if self.standard is not None else (-np.inf, 0.0, -np.inf, np.inf)
 
 
 def in_box(points: np.ndarray, box) -> np.ndarray:
@@ -154,7 +155,7 @@ def in_box(points: np.ndarray, box) -> np.ndarray:
         return (x >= x0) & (x <= x1) & (y >= y0) & (y <= y1)
 
 
-def back_project(camera: Camera, u, v) -> tuple[np.ndarray, np.ndarray]:
+def back_project(camera: Camera, u, v) -> tuple[np.ndarray, np.ndarray | np.bool_]:
     """Points where the rays of pixels ``(u, v)`` meet the sample plane ``z = 0``.
 
     Returns
@@ -291,7 +292,9 @@ def pixel_geometry(rig: Rig, u, v) -> PixelGeometry:
     mp = mirror_point(pts)
     muv, front = project(cam, mp)
     with np.errstate(invalid="ignore"):
-        inside = (muv[..., 0] >= 0) & (muv[..., 0] <= cam.width - 1) & (muv[..., 1] >= 0) & (muv[..., 1] <= cam.height - 1)
+        inside = (
+            (muv[..., 0] >= 0) & (muv[..., 0] <= cam.width - 1) & (muv[..., 1] >= 0) & (muv[..., 1] <= cam.height - 1)
+        )
     mirror_ok = hit & front & inside & in_box(mp, rig.standard_box())
     return PixelGeometry(pts, wi, wo, dl, dc, irr, in_probe, in_std, mp, muv, mirror_ok)
 
@@ -314,13 +317,13 @@ class BandGeometry(NamedTuple):
         ``(B, W)`` as :attr:`PixelGeometry.mirror_ok`.
     """
 
-    points: np.ndarray
-    wi: np.ndarray
-    wo: np.ndarray
-    in_probe: np.ndarray
-    in_standard: np.ndarray
-    mirror_pixels: np.ndarray
-    mirror_ok: np.ndarray
+    points: jax.Array
+    wi: jax.Array
+    wo: jax.Array
+    in_probe: jax.Array
+    in_standard: jax.Array
+    mirror_pixels: jax.Array
+    mirror_ok: jax.Array
 
 
 def rig_constants(rig: Rig, tangent) -> np.ndarray:
@@ -328,8 +331,18 @@ def rig_constants(rig: Rig, tangent) -> np.ndarray:
     cam = rig.camera
     t = np.asarray(tangent, np.float64)
     t = t / np.linalg.norm(t)
-    return np.concatenate([cam.axes().ravel(), _vec(cam.position), cam.focal, cam.principal, _vec(rig.lamp),
-                           rig.probe_box(), rig.standard_box(), t])
+    return np.concatenate(
+        [
+            cam.axes().ravel(),
+            _vec(cam.position),
+            cam.focal,
+            cam.principal,
+            _vec(rig.lamp),
+            rig.probe_box(),
+            rig.standard_box(),
+            t,
+        ]
+    )
 
 
 def _jnp_in_box(x, y, box):
@@ -383,4 +396,3 @@ def band_geometry_jnp(k, rows, *, width: int, height: int, col0=0, ncols: int | 
     inside = (mu >= 0) & (mu <= width - 1) & (mv >= 0) & (mv <= height - 1)
     mirror_ok = hit & front & inside & _jnp_in_box(-x, y, std)
     return BandGeometry(pts, wi, wo, in_probe, in_std, jnp.stack([mu, mv], -1), mirror_ok)
-

@@ -11,7 +11,7 @@ from .._files import RAW_SUFFIXES, decode_lut, read_image, sha256
 from ..geometry import Camera, Rig
 from ._errors import CAPTURE_FILE, CaptureError
 from ._schema import CaptureFile, parse_capture_file
-from ._smartphone import load_smartphone_capture
+from ._smartphone import SmartphoneCapture, load_smartphone_capture
 
 __all__ = ["IMAGE_SUFFIXES", "Capture", "load_capture"]
 
@@ -75,11 +75,17 @@ def _load_image(folder: Path, name: str, field: str, cfg: CaptureFile):
         raise CaptureError(name, None, f"image file is missing (named by {CAPTURE_FILE} {field})")
     suffix = path.suffix.lower()
     if suffix not in IMAGE_SUFFIXES:
-        raise CaptureError(CAPTURE_FILE, field, f"unsupported image type {suffix!r}; expected one of {', '.join(IMAGE_SUFFIXES)}")
+        raise CaptureError(
+            CAPTURE_FILE, field, f"unsupported image type {suffix!r}; expected one of {', '.join(IMAGE_SUFFIXES)}"
+        )
     enc, bits = cfg.images.encoding, cfg.images.bit_depth
     if suffix in RAW_SUFFIXES and (enc != "linear" or bits != 16):
-        raise CaptureError(CAPTURE_FILE, "images.encoding", f"raw file {name} is decoded linear 16-bit; "
-                           f"set encoding = \"linear\" and bit_depth = 16 (got {enc!r}, {bits})")
+        raise CaptureError(
+            CAPTURE_FILE,
+            "images.encoding",
+            f"raw file {name} is decoded linear 16-bit; "
+            f'set encoding = "linear" and bit_depth = 16 (got {enc!r}, {bits})',
+        )
     if suffix in (".jpg", ".jpeg") and bits != 8:
         raise CaptureError(CAPTURE_FILE, "images.bit_depth", f"JPEG {name} is 8-bit, got bit_depth = {bits}")
     try:
@@ -89,16 +95,20 @@ def _load_image(folder: Path, name: str, field: str, cfg: CaptureFile):
         raise CaptureError(name, None, f"cannot read the image ({reason[:160]})") from None
     want = np.uint8 if bits == 8 else np.uint16
     if codes.dtype != want:
-        raise CaptureError(name, None, f"holds {codes.dtype} values but {CAPTURE_FILE} images.bit_depth = {bits} "
-                           f"(expected {np.dtype(want).name})")
+        raise CaptureError(
+            name,
+            None,
+            f"holds {codes.dtype} values but {CAPTURE_FILE} images.bit_depth = {bits} (expected {np.dtype(want).name})",
+        )
     w, h = cfg.camera.image_size
     if codes.shape[:2] != (h, w):
-        raise CaptureError(name, None, f"is {codes.shape[1]}×{codes.shape[0]} pixels but {CAPTURE_FILE} "
-                           f"camera.image_size = [{w}, {h}]")
+        raise CaptureError(
+            name, None, f"is {codes.shape[1]}×{codes.shape[0]} pixels but {CAPTURE_FILE} camera.image_size = [{w}, {h}]"
+        )
     return codes, sha256(path)
 
 
-def load_capture(path) -> Capture:
+def load_capture(path) -> Capture | SmartphoneCapture:
     """Load and validate a capture folder.
 
     Parameters
@@ -108,7 +118,8 @@ def load_capture(path) -> Capture:
 
     Returns
     -------
-    Capture
+    Capture or SmartphoneCapture
+        A :class:`SmartphoneCapture` when ``method = "smartphone"``.
 
     Raises
     ------

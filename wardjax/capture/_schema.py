@@ -51,7 +51,6 @@ the file and the field, e.g. ``capture.toml: camera.focal_px: Input should be
 greater than 0 (got -5.0)``.
 """
 
-
 from __future__ import annotations
 
 import tomllib
@@ -63,7 +62,7 @@ import pydantic
 from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, FiniteFloat
 
 from ._errors import CAPTURE_FILE, CaptureError, pydantic_error
-from ._smartphone import parse_smartphone_file
+from ._smartphone import SmartphoneCaptureFile, parse_smartphone_file
 
 __all__ = ["CaptureFile", "parse_capture_file"]
 
@@ -145,7 +144,10 @@ class CaptureFile(_Section):
     method: Literal["scanline"]
     name: str | None = None
     rho_standard: Annotated[tuple[Reflectance, Reflectance, Reflectance], BeforeValidator(_scalar_to_rgb)] = (
-        0.99, 0.99, 0.99)
+        0.99,
+        0.99,
+        0.99,
+    )
     images: ImagesSection
     rig: RigSection
     camera: CameraSection
@@ -161,13 +163,18 @@ def _check_physics(cfg: CaptureFile) -> None:
     if lamp[2] <= 0:
         raise CaptureError(f, "rig.lamp", f"the lamp must be above the sample plane (z > 0), got z = {lamp[2]}")
     if abs(lamp[0]) > LAMP_X_TOLERANCE:
-        raise CaptureError(f, "rig.lamp", f"the lamp must lie in the plane x = 0 (the method's symmetry; "
-                           f"±{LAMP_X_TOLERANCE} mm), got x = {lamp[0]}")
+        raise CaptureError(
+            f,
+            "rig.lamp",
+            f"the lamp must lie in the plane x = 0 (the method's symmetry; ±{LAMP_X_TOLERANCE} mm), got x = {lamp[0]}",
+        )
     if cam[2] <= 0:
         raise CaptureError(f, "rig.camera", f"the camera must be above the sample plane (z > 0), got z = {cam[2]}")
     fwd = np.array(cfg.camera.look_at) - cam
     if np.linalg.norm(fwd) < 1e-9:
-        raise CaptureError(f, "camera.look_at", f"look_at {list(cfg.camera.look_at)} coincides with the camera position")
+        raise CaptureError(
+            f, "camera.look_at", f"look_at {list(cfg.camera.look_at)} coincides with the camera position"
+        )
     if np.linalg.norm(np.cross(fwd / np.linalg.norm(fwd), np.array(cfg.camera.up))) < 1e-6:
         raise CaptureError(f, "camera.up", f"up {list(cfg.camera.up)} is parallel to the optical axis")
     w, h = cfg.camera.image_size
@@ -181,7 +188,9 @@ def _check_physics(cfg: CaptureFile) -> None:
             continue
         x0, x1, y0, y1 = box
         if not (x0 < x1 and y0 < y1):
-            raise CaptureError(f, f"regions.{key}", f"expected [x_min, x_max, y_min, y_max] with min < max, got {list(box)}")
+            raise CaptureError(
+                f, f"regions.{key}", f"expected [x_min, x_max, y_min, y_max] with min < max, got {list(box)}"
+            )
         if (sign > 0 and x0 < 0) or (sign < 0 and x1 > 0):
             side = "x ≥ 0 (the probe side)" if sign > 0 else "x ≤ 0 (the standard side)"
             raise CaptureError(f, f"regions.{key}", f"must lie at {side}, got {list(box)}")
@@ -189,7 +198,7 @@ def _check_physics(cfg: CaptureFile) -> None:
         raise CaptureError(f, "material.tangent", f"must be a non-zero direction, got {list(cfg.material.tangent)}")
 
 
-def parse_capture_file(path: Path) -> CaptureFile:
+def parse_capture_file(path: Path) -> CaptureFile | SmartphoneCaptureFile:
     """Read and validate ``capture.toml`` (raises :class:`CaptureError`)."""
     f = CAPTURE_FILE
     if not path.is_file():

@@ -94,9 +94,14 @@ def load_display(name: str | Display = "iphone5s") -> Display:
         raise ValueError(f"display must be one of {sorted(table)} or a Display; got {name!r}")
     d = table[name]
     return Display(
-        name=name, ppi=float(d["ppi"]), width_px=int(d["width_px"]), height_px=int(d["height_px"]),
-        luminance_max=float(d["luminance_max_cd_m2"]), luminance_min=float(d["luminance_min_cd_m2"]),
-        ppb_min=int(d["ppb_min"]), ppb_max=int(d["ppb_max"]),
+        name=name,
+        ppi=float(d["ppi"]),
+        width_px=int(d["width_px"]),
+        height_px=int(d["height_px"]),
+        luminance_max=float(d["luminance_max_cd_m2"]),
+        luminance_min=float(d["luminance_min_cd_m2"]),
+        ppb_min=int(d["ppb_min"]),
+        ppb_max=int(d["ppb_max"]),
     )
 
 
@@ -109,8 +114,10 @@ def load_viewing(name: str | Viewing = "paper") -> Viewing:
         raise ValueError(f"viewing must be one of {sorted(table)} or a Viewing; got {name!r}")
     v = table[name]
     return Viewing(
-        name=name, eye_to_screen_mm=float(v["eye_to_screen_in"]) * MM_PER_IN,
+        name=name,
+        eye_to_screen_mm=float(v["eye_to_screen_in"]) * MM_PER_IN,
         screen_obliquity_deg=float(v.get("screen_obliquity_deg", 0.0)),
         eye_to_surface_mm=float(v["eye_to_surface_in"]) * MM_PER_IN,
-        view_angle_deg=float(v["view_angle_deg"]), phone_angle_deg=float(v["phone_angle_deg"]),
+        view_angle_deg=float(v["view_angle_deg"]),
+        phone_angle_deg=float(v["phone_angle_deg"]),
     )

@@ -62,8 +62,12 @@ class _Section(BaseModel):
 
 class PhotoSection(_Section):
     file: str = Field(min_length=1)
-    region: tuple[Annotated[int, Field(ge=0)], Annotated[int, Field(ge=0)],
-                  Annotated[int, Field(ge=0)], Annotated[int, Field(ge=0)]]
+    region: tuple[
+        Annotated[int, Field(ge=0)],
+        Annotated[int, Field(ge=0)],
+        Annotated[int, Field(ge=0)],
+        Annotated[int, Field(ge=0)],
+    ]
     decoding: Literal["gamma2.2", "srgb"] = "gamma2.2"
 
 
@@ -75,7 +79,9 @@ class ThresholdsSection(_Section):
     @pydantic.model_validator(mode="after")
     def _one_form(self):
         if (self.ppb is None) == (self.ppb_mean is None):
-            raise ValueError("give either ppb = [...] (each observer) or ppb_mean with n_observers, not both or neither")
+            raise ValueError(
+                "give either ppb = [...] (each observer) or ppb_mean with n_observers, not both or neither"
+            )
         if self.ppb_mean is not None and self.n_observers is None:
             raise ValueError("ppb_mean needs n_observers")
         return self
@@ -130,12 +136,16 @@ def parse_smartphone_file(raw: dict, file: str) -> SmartphoneCaptureFile:
         raise pydantic_error(e, file) from None
     y0, y1, x0, x1 = cfg.photo.region
     if y1 <= y0 or x1 <= x0:
-        raise CaptureError(file, "photo.region", f"[y0, y1, x0, x1] must have y1 > y0 and x1 > x0 (got {list(cfg.photo.region)})")
+        raise CaptureError(
+            file, "photo.region", f"[y0, y1, x0, x1] must have y1 > y0 and x1 > x0 (got {list(cfg.photo.region)})"
+        )
     lo, hi = cfg.specular.n_range
     if not lo <= cfg.specular.n <= hi:
         raise CaptureError(file, "specular.n", f"{cfg.specular.n} lies outside specular.n_range [{lo}, {hi}]")
-    for field, fn, value in (("setup.display", load_display, cfg.setup.display),
-                             ("setup.viewing", load_viewing, cfg.setup.viewing)):
+    for field, fn, value in (
+        ("setup.display", load_display, cfg.setup.display),
+        ("setup.viewing", load_viewing, cfg.setup.viewing),
+    ):
         try:
             fn(value)
         except (KeyError, ValueError) as e:
@@ -152,13 +162,18 @@ def load_smartphone_capture(folder: Path, cfg: SmartphoneCaptureFile) -> Smartph
         photo = read_image(path)
     except (OSError, ValueError, RuntimeError) as e:
         text = str(e).strip().splitlines()
-        raise CaptureError(cfg.photo.file, None, f"cannot be read as an image ({text[0] if text else type(e).__name__})") from None
+        raise CaptureError(
+            cfg.photo.file, None, f"cannot be read as an image ({text[0] if text else type(e).__name__})"
+        ) from None
     if photo.ndim != 3 or photo.shape[-1] != 3:
-        raise CaptureError(cfg.photo.file, None, f"is not an RGB image (shape {photo.shape}); the method needs a colour photo")
+        raise CaptureError(
+            cfg.photo.file, None, f"is not an RGB image (shape {photo.shape}); the method needs a colour photo"
+        )
     h, w = photo.shape[:2]
     y0, y1, x0, x1 = cfg.photo.region
     if y1 > h or x1 > w:
-        raise CaptureError(CAPTURE_FILE, "photo.region",
-                           f"{list(cfg.photo.region)} reaches outside the {w}×{h} photo {cfg.photo.file}")
+        raise CaptureError(
+            CAPTURE_FILE, "photo.region", f"{list(cfg.photo.region)} reaches outside the {w}×{h} photo {cfg.photo.file}"
+        )
     checksums = {CAPTURE_FILE: sha256(folder / CAPTURE_FILE), cfg.photo.file: sha256(path)}
     return SmartphoneCapture(folder, cfg.name or folder.resolve().name, cfg, photo, checksums)

@@ -114,6 +114,14 @@ def capture_data(cap: Capture, *, max_samples: int = 20_000, band_rows: int = 51
         raise CaptureError(cfg.images.lit, None, f"no image column holds {MIN_SCANLINE_SAMPLES} usable probe values")
     F, cens = F[keep], cens[keep]
     sigma = _noise_model(F, exact=~cens)
-    return scanline_data(F, bins.wi[keep], bins.wo[keep], sigma, points=bins.points[keep],
-                         lamp=np.asarray(rig.lamp, float), kind="ratio", rho_standard=float(np.mean(cap.rho_standard)),
-                         censored=cens)
+    return scanline_data(
+        F,
+        bins.wi[keep],
+        bins.wo[keep],
+        sigma,
+        points=bins.points[keep],
+        lamp=np.asarray(rig.lamp, float),
+        kind="ratio",
+        rho_standard=float(np.mean(cap.rho_standard)),
+        censored=cens,
+    )

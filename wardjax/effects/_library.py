@@ -16,6 +16,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ._effect import Effect, Param
+from ._models import _lobe
 
 __all__ = ["LIBRARY", "library", "get_effect"]
 
@@ -321,8 +322,16 @@ class Anisotropy(_ScanlineEffect):
     covariate = "half_azimuth"
     params = (
         Param("eta", 0.15, scale=0.2, doc="½ log(αx/αy)"),
-        Param("phi", 0.0, absent=math.nan, scale=1.0, starts=(math.pi / 4, math.pi / 2, -math.pi / 4),
-              unit="rad", doc="tangent orientation", prior_sd=3.0),
+        Param(
+            "phi",
+            0.0,
+            absent=math.nan,
+            scale=1.0,
+            starts=(math.pi / 4, math.pi / 2, -math.pi / 4),
+            unit="rad",
+            doc="tangent orientation",
+            prior_sd=3.0,
+        ),
     )
 
     def lobe(self, v, ax, ay, phi):
@@ -349,13 +358,18 @@ class SecondLobe(_ScanlineEffect):
     covariate = "theta_h"
     params = (
         Param("q", 0.3, scale=0.3, sign=+1, doc="second-lobe ρs / first-lobe ρs"),
-        Param("log_ratio", math.log(3.0), absent=math.nan, scale=1.0, starts=(-math.log(3.0),),
-              doc="log(α2/α)", prior_sd=2.0),
+        Param(
+            "log_ratio",
+            math.log(3.0),
+            absent=math.nan,
+            scale=1.0,
+            starts=(-math.log(3.0),),
+            doc="log(α2/α)",
+            prior_sd=2.0,
+        ),
     )
 
     def extra(self, v, ctx, base, ax, ay, phi):
-        from ._models import _lobe
-
         a2 = base["alpha"] * jnp.exp(v["log_ratio"])
         return (v["q"] * base["rho_s"] * _lobe(ctx, a2, a2, 0.0))[..., None]
 
@@ -404,8 +418,17 @@ class Retroreflection(_ScanlineEffect):
     covariate = "psi"
     params = (
         Param("amp", 0.01, scale=0.02, sign=+1, unit="sr⁻¹", doc="retro-lobe peak"),
-        Param("width", 0.5, absent=math.nan, kind="log", scale=0.5, starts=(0.25, 1.0), unit="rad",
-              doc="retro-lobe angular SD", prior_sd=2.0),
+        Param(
+            "width",
+            0.5,
+            absent=math.nan,
+            kind="log",
+            scale=0.5,
+            starts=(0.25, 1.0),
+            unit="rad",
+            doc="retro-lobe angular SD",
+            prior_sd=2.0,
+        ),
     )
 
     def extra(self, v, ctx, base, ax, ay, phi):
@@ -475,9 +498,20 @@ class PPBCurvature(_ThresholdEffect):
 
 
 LIBRARY: tuple[Effect, ...] = (
-    Saturation(), AmbientOffset(), GammaMismatch(), IlluminationGradient(), SymmetricFalloff(),
-    DirectionalEmission(), FresnelRise(), Anisotropy(), SecondLobe(), ColouredSpecular(), Retroreflection(),
-    ContrastGloss(), LobeFloor(), PPBCurvature(),
+    Saturation(),
+    AmbientOffset(),
+    GammaMismatch(),
+    IlluminationGradient(),
+    SymmetricFalloff(),
+    DirectionalEmission(),
+    FresnelRise(),
+    Anisotropy(),
+    SecondLobe(),
+    ColouredSpecular(),
+    Retroreflection(),
+    ContrastGloss(),
+    LobeFloor(),
+    PPBCurvature(),
 )
 
 

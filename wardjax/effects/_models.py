@@ -151,8 +151,9 @@ def scanline_data(
     for name, w in (("wi", wi), ("wo", wo)):
         if w.shape != (s, n, 3):
             raise ValueError(f"{name} must have shape {(s, n, 3)} to match f_r, got {w.shape}")
-    sig = np.broadcast_to(np.asarray(sigma, np.float64) if np.ndim(sigma) != 2 else np.asarray(sigma)[..., None],
-                          f.shape).copy()
+    sig = np.broadcast_to(
+        np.asarray(sigma, np.float64) if np.ndim(sigma) != 2 else np.asarray(sigma)[..., None], f.shape
+    ).copy()
     if kind not in ("ratio", "brdf"):
         raise ValueError(f"kind must be 'ratio' or 'brdf', got {kind!r}")
     m = np.isfinite(f) & np.isfinite(sig) & (sig > 0)
@@ -187,8 +188,18 @@ def scanline_data(
     sig = np.where(m, sig, 1.0)
     avail = tuple(sorted(cov)) + (("rgb",) if c == 3 else ())
     # NumPy float64 leaves: they become float64 JAX arrays inside the fits' scoped x64
-    return ScanlineData(y=f, sigma=sig, mask=m, wi=wi, wo=wo, cov=cov, censored=cens, kind=kind,
-                        f_std=float(rho_standard) / np.pi, available=avail)
+    return ScanlineData(
+        y=f,
+        sigma=sig,
+        mask=m,
+        wi=wi,
+        wo=wo,
+        cov=cov,
+        censored=cens,
+        kind=kind,
+        f_std=float(rho_standard) / np.pi,
+        available=avail,
+    )
 
 
 class ThresholdData(eqx.Module):
@@ -268,8 +279,15 @@ class ScanlineModel:
         m = np.asarray(data.mask)
         peak = float(np.max(np.where(m, y, -np.inf)) - np.median(y[m]))
         return (
-            Param("rho_s", max(peak * 4 * np.pi * 0.1**2, 1e-3), kind="log", scale=0.05, unit="",
-                  doc="specular reflectance", starts=()),
+            Param(
+                "rho_s",
+                max(peak * 4 * np.pi * 0.1**2, 1e-3),
+                kind="log",
+                scale=0.05,
+                unit="",
+                doc="specular reflectance",
+                starts=(),
+            ),
             Param("alpha", 0.1, kind="log", scale=0.1, starts=(0.03, 0.3), doc="lobe width (RMS slope)"),
         )
 
@@ -285,7 +303,11 @@ class ScanlineModel:
         hz = jnp.where(geom.valid, h[..., 2], 1.0)
         hn = jnp.sqrt(jnp.sum(h * h, axis=-1))
         ctx = {
-            "hx": h[..., 0], "hy": h[..., 1], "hz2": hz * hz, "g": geom.g, "valid": geom.valid,
+            "hx": h[..., 0],
+            "hy": h[..., 1],
+            "hz2": hz * hz,
+            "g": geom.g,
+            "valid": geom.valid,
             "cos_d": jnp.clip(jnp.sum(h * wi, axis=-1) / hn, 0.0, 1.0),
             "psi": jnp.arccos(jnp.clip(jnp.sum(wi * wo, axis=-1), -1.0 + 1e-12, 1.0 - 1e-12)),
             "f_std": data.f_std,
@@ -405,8 +427,10 @@ class ThresholdModel:
         x, y, s = (np.asarray(a) for a in (data.ppb, data.sd, data.sigma))
         X = np.stack([np.ones_like(x), x], -1) / s[:, None]
         a, b = np.linalg.lstsq(X, y / s, rcond=None)[0]
-        return (Param("a", float(a), scale=0.1, unit="deg", doc="intercept"),
-                Param("b", float(b), scale=0.1, unit="deg/PPB", doc="slope"))
+        return (
+            Param("a", float(a), scale=0.1, unit="deg", doc="intercept"),
+            Param("b", float(b), scale=0.1, unit="deg/PPB", doc="slope"),
+        )
 
     def n_profiled(self, data) -> int:
         return 0

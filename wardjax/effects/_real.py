@@ -68,8 +68,9 @@ def load_curet(folder: str | Path | None = None) -> tuple[np.ndarray, np.ndarray
     a = np.loadtxt(d / "abrdf.dat")
     t = np.loadtxt(d / "table.txt")
     if a.ndim != 2 or a.shape[1] != 206 or t.shape != (205, 5):
-        raise ValueError(f"{d}: expected abrdf.dat rows of 1 + 205 values and a 205 × 5 table.txt, "
-                         f"got {a.shape} and {t.shape}")
+        raise ValueError(
+            f"{d}: expected abrdf.dat rows of 1 + 205 values and a 205 × 5 table.txt, got {a.shape} and {t.shape}"
+        )
 
     def unit(theta, phi):
         return np.stack([np.sin(theta) * np.cos(phi), np.sin(theta) * np.sin(phi), np.cos(theta)], -1)

@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from .._files import write_bytes_atomic
+from ._structure import _binned_test
 
 __all__ = ["Candidate", "DiscoveryReport", "FitState", "Step"]
 
@@ -82,9 +83,21 @@ class Candidate:
         return self.state is None or bool(self.state.ok)
 
     def as_dict(self) -> dict:
-        return {k: _num(getattr(self, k)) for k in
-                ("effect", "k", "delta_chi2", "delta_bic", "p_value", "explained", "structure_p", "physical",
-                 "gap_p_after", "converged")}
+        return {
+            k: _num(getattr(self, k))
+            for k in (
+                "effect",
+                "k",
+                "delta_chi2",
+                "delta_bic",
+                "p_value",
+                "explained",
+                "structure_p",
+                "physical",
+                "gap_p_after",
+                "converged",
+            )
+        }
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -175,7 +188,7 @@ class DiscoveryReport:
         if self.found and self.explained:
             return f"found {', '.join(self.found)}; the residuals are now consistent with the noise"
         if self.found:
-            return (f"found {', '.join(self.found)}, but structure remains that no library effect explains")
+            return f"found {', '.join(self.found)}, but structure remains that no library effect explains"
         if self.explained:
             return "nothing missing: the baseline explains the data to the noise level"
         return "unexplained discrepancy: no library effect explains it"
@@ -188,19 +201,35 @@ class DiscoveryReport:
             "found": list(self.found),
             "gap": [_num(g) for g in self.gap],
             "verdict": self.verdict(),
-            "baseline": {"params": self.baseline.values.get("model", {}),
-                         "stderr": {k: _num(v) for k, v in self.baseline.sigma.get("model", {}).items()},
-                         "chi2": _num(self.baseline.chi2), "dof": self.baseline.dof},
-            "steps": [{
-                "effect": s.effect, "title": s.title, "side": s.side,
-                "params": {k: _num(v) for k, v in s.params.items()},
-                "stderr": {k: _num(v) for k, v in s.stderr.items()},
-                "evidence": s.evidence.as_dict(), "gap_before": _num(s.gap_before), "gap_after": _num(s.gap_after),
-                "candidates": [c.as_dict() for c in s.candidates],
-            } for s in self.steps],
-            "final": {"params": {k: {n: _num(v) for n, v in d.items()} for k, d in self.final.values.items()
-                                 if k == "model" or k in self.found},
-                      "chi2": _num(self.final.chi2), "dof": self.final.dof},
+            "baseline": {
+                "params": self.baseline.values.get("model", {}),
+                "stderr": {k: _num(v) for k, v in self.baseline.sigma.get("model", {}).items()},
+                "chi2": _num(self.baseline.chi2),
+                "dof": self.baseline.dof,
+            },
+            "steps": [
+                {
+                    "effect": s.effect,
+                    "title": s.title,
+                    "side": s.side,
+                    "params": {k: _num(v) for k, v in s.params.items()},
+                    "stderr": {k: _num(v) for k, v in s.stderr.items()},
+                    "evidence": s.evidence.as_dict(),
+                    "gap_before": _num(s.gap_before),
+                    "gap_after": _num(s.gap_after),
+                    "candidates": [c.as_dict() for c in s.candidates],
+                }
+                for s in self.steps
+            ],
+            "final": {
+                "params": {
+                    k: {n: _num(v) for n, v in d.items()}
+                    for k, d in self.final.values.items()
+                    if k == "model" or k in self.found
+                },
+                "chi2": _num(self.final.chi2),
+                "dof": self.final.dof,
+            },
             "unexplained": list(self.unexplained),
             "partial": list(self.partial),
             "not_detectable": [{"effect": n, "reason": w} for n, w in self.not_detectable],
@@ -213,8 +242,11 @@ class DiscoveryReport:
     def to_markdown(self, figures: dict[str, str] | None = None) -> str:
         """A readable report; ``figures`` maps ``"gap"`` / effect names to image links."""
         figures = figures or {}
-        L = ["# Missing-effect discovery\n", f"**Model:** {self.model} — {self.n_obs} observations "
-             f"({self.n_profiled} profiled ρd).\n", f"**Verdict:** {self.verdict()}.\n"]
+        L = [
+            "# Missing-effect discovery\n",
+            f"**Model:** {self.model} — {self.n_obs} observations ({self.n_profiled} profiled ρd).\n",
+            f"**Verdict:** {self.verdict()}.\n",
+        ]
         L.append("## Gap per step\n")
         L.append("| step | model | gap (χ²/dof) |\n|---|---|---|")
         L.append(f"| 0 | baseline | {self.gap[0]:.3f} |")
@@ -229,33 +261,45 @@ class DiscoveryReport:
         for i, s in enumerate(self.steps, 1):
             ev = s.evidence
             L.append(f"## Step {i}: {s.effect} — {s.title}\n")
-            L.append("Parameters: " + ", ".join(f"{k} = {_fmt(v, s.stderr.get(k))}" for k, v in s.params.items())
-                     + "\n")
-            L.append(f"Evidence: Δχ² = {ev.delta_chi2:.1f}, ΔBIC = {ev.delta_bic:.1f} (k = {ev.k}), "
-                     f"LR p = {ev.p_value:.2g}, explains {100 * min(ev.explained, 1):.0f} % of the excess; "
-                     f"gap {s.gap_before:.3f} → {s.gap_after:.3f}.\n")
+            L.append(
+                "Parameters: " + ", ".join(f"{k} = {_fmt(v, s.stderr.get(k))}" for k, v in s.params.items()) + "\n"
+            )
+            L.append(
+                f"Evidence: Δχ² = {ev.delta_chi2:.1f}, ΔBIC = {ev.delta_bic:.1f} (k = {ev.k}), "
+                f"LR p = {ev.p_value:.2g}, explains {100 * min(ev.explained, 1):.0f} % of the excess; "
+                f"gap {s.gap_before:.3f} → {s.gap_after:.3f}.\n"
+            )
             L.append("| candidate | k | Δχ² | ΔBIC | LR p | structure p |\n|---|---|---|---|---|---|")
             for c in s.candidates:
                 ge = "" if c.converged else "≥ "
-                L.append(f"| {c.effect} | {c.k} | {ge}{c.delta_chi2:.1f} | {ge}{c.delta_bic:.1f} | {c.p_value:.2g} | "
-                         f"{c.structure_p:.2g} |")
+                L.append(
+                    f"| {c.effect} | {c.k} | {ge}{c.delta_chi2:.1f} | {ge}{c.delta_bic:.1f} | {c.p_value:.2g} | "
+                    f"{c.structure_p:.2g} |"
+                )
             if not all(c.converged for c in s.candidates):
-                L.append("\n≥: the fit stopped at the Levenberg–Marquardt step cap (`lm_steps`); Δχ² and ΔBIC are "
-                         "lower bounds, below half the winner's ΔBIC, so the fit was not continued.")
+                L.append(
+                    "\n≥: the fit stopped at the Levenberg–Marquardt step cap (`lm_steps`); Δχ² and ΔBIC are "
+                    "lower bounds, below half the winner's ΔBIC, so the fit was not continued."
+                )
             if s.effect in figures:
                 L.append(f"\n![residuals against {s.plot['covariate'] if s.plot else ''}]({figures[s.effect]})\n")
         L.append("\n## Unexplained structure\n")
-        L.append("\n".join(f"- {u}" for u in self.unexplained) if self.unexplained else "None: the residuals are "
-                 "consistent with the noise against every covariate.")
+        L.append(
+            "\n".join(f"- {u}" for u in self.unexplained)
+            if self.unexplained
+            else "None: the residuals are consistent with the noise against every covariate."
+        )
         if self.not_detectable:
             L.append("\n## Not detectable from these data\n")
             L.extend(f"- {n}: {w}" for n, w in self.not_detectable)
         if self.not_testable:
             L.append("\n## Not testable on these data\n")
             L.extend(f"- {n}: {w}" for n, w in self.not_testable)
-        L.append(f"\n_Criterion: largest ΔBIC, added if ΔBIC > 0, Bonferroni LR p < {self.settings['alpha']}, and "
-                 f"explaining ≥ {100 * self.settings['min_explained']:.0f} % of the excess or leaving a gap within the "
-                 f"noise. Time {self.seconds:.1f} s._")
+        L.append(
+            f"\n_Criterion: largest ΔBIC, added if ΔBIC > 0, Bonferroni LR p < {self.settings['alpha']}, and "
+            f"explaining ≥ {100 * self.settings['min_explained']:.0f} % of the excess or leaving a gap within the "
+            f"noise. Time {self.seconds:.1f} s._"
+        )
         return "\n".join(L) + "\n"
 
     def __str__(self) -> str:
@@ -286,11 +330,11 @@ class DiscoveryReport:
         fig = Figure(figsize=(8.0, 3.0), layout="constrained")
         if not s.plot:
             return fig
-        from ._discover import _binned_test
-
         axs = fig.subplots(1, 2, sharey=True)
-        for ax, key, title in ((axs[0], "before", f"before (gap {s.gap_before:.2f})"),
-                               (axs[1], "after", f"after + {s.effect} (gap {s.gap_after:.2f})")):
+        for ax, key, title in (
+            (axs[0], "before", f"before (gap {s.gap_before:.2f})"),
+            (axs[1], "after", f"after + {s.effect} (gap {s.gap_after:.2f})"),
+        ):
             x, r = np.asarray(s.plot[f"x_{key}"], float), np.asarray(s.plot[f"r_{key}"], float)
             ax.plot(x, r, ".", ms=1.5, alpha=0.25, color="0.5", rasterized=True)
             _, _, p, xc, mean, sem = _binned_test(r, x)
@@ -341,7 +385,7 @@ class DiscoveryReport:
                 body.append("</table>")
                 in_table = False
             if line.startswith("!["):
-                src = line[line.index("(") + 1: line.rindex(")")]
+                src = line[line.index("(") + 1 : line.rindex(")")]
                 body.append(f'<img src="{src}"/>')
             elif line.startswith("## "):
                 body.append(f"<h3>{html.escape(line[3:])}</h3>")

@@ -20,8 +20,12 @@ PARAMS_SCHEMA = "wardjax.params/1"
 
 def params_dict(p: WardParams) -> dict:
     """The JSON form of one parameter set (ρd RGB, grey ρs, αx, αy)."""
-    return {"rho_d": np.broadcast_to(np.asarray(p.rho_d, float), (3,)).tolist(), "rho_s": float(np.mean(p.rho_s)),
-            "alpha_x": float(p.alpha_x), "alpha_y": float(p.alpha_y)}
+    return {
+        "rho_d": np.broadcast_to(np.asarray(p.rho_d, float), (3,)).tolist(),
+        "rho_s": float(np.mean(p.rho_s)),
+        "alpha_x": float(p.alpha_x),
+        "alpha_y": float(p.alpha_y),
+    }
 
 
 def software_version() -> str:
@@ -34,9 +38,21 @@ def software_version() -> str:
         return "0+unknown"
 
 
-def params_document(*, name: str, method: str, model: str, normalization: str, params: WardParams,
-                    stderr: WardParams, fit: dict, radiance: dict, files: dict, inputs: dict, created: str,
-                    extra: dict | None = None) -> dict:
+def params_document(
+    *,
+    name: str,
+    method: str,
+    model: str,
+    normalization: str,
+    params: WardParams,
+    stderr: WardParams,
+    fit: dict,
+    radiance: dict,
+    files: dict,
+    inputs: dict,
+    created: str,
+    extra: dict | None = None,
+) -> dict:
     """The ``params.json`` document; every method's writer calls this one builder.
 
     ``radiance`` holds the exported material: ``normalization``, ``params``,
@@ -45,8 +61,9 @@ def params_document(*, name: str, method: str, model: str, normalization: str, p
     """
     rad = dict(radiance)
     rad_params = rad["params"]
-    rad.update(params=params_dict(rad_params), stderr=params_dict(rad["stderr"]),
-               color=radiance_rgb(rad_params.rho_d).tolist())
+    rad.update(
+        params=params_dict(rad_params), stderr=params_dict(rad["stderr"]), color=radiance_rgb(rad_params.rho_d).tolist()
+    )
     doc = {
         "schema": PARAMS_SCHEMA,
         "name": name,
@@ -72,26 +89,49 @@ def capture_fit_document(fit, *, created: str, files: dict | None = None, extra:
     """``params.json`` of a scanline capture's fit (:class:`~wardjax.CaptureFit`)."""
     comb, rad = fit.combined, fit.radiance
     return params_document(
-        name=fit.name, method=fit.method, model=fit.model, normalization=fit.normalization,
-        params=fit.params, stderr=fit.stderr,
+        name=fit.name,
+        method=fit.method,
+        model=fit.model,
+        normalization=fit.normalization,
+        params=fit.params,
+        stderr=fit.stderr,
         fit={
             "status": comb.status.name.lower(),
             "chi2": comb.chi2,
             "dof": comb.dof,
             "reduced_chi2": comb.reduced_chi2,
             "n_scanlines": comb.n_scanlines,
-            "covariance": {"parameters": ["rho_s", "alpha"] if fit.model == "isotropic"
-                           else ["rho_s", "alpha_x", "alpha_y"], "matrix": comb.covariance},
+            "covariance": {
+                "parameters": ["rho_s", "alpha"] if fit.model == "isotropic" else ["rho_s", "alpha_x", "alpha_y"],
+                "matrix": comb.covariance,
+            },
             "diagnostics": fit.diagnostics,
         },
-        radiance={"normalization": RADIANCE_NORMALIZATION, "params": rad.params, "stderr": rad.stderr,
-                  "status": rad.status.name.lower(), "tangent": list(fit.tangent)},
-        files=files or {}, inputs=fit.checksums, created=created, extra=extra,
+        radiance={
+            "normalization": RADIANCE_NORMALIZATION,
+            "params": rad.params,
+            "stderr": rad.stderr,
+            "status": rad.status.name.lower(),
+            "tangent": list(fit.tangent),
+        },
+        files=files or {},
+        inputs=fit.checksums,
+        created=created,
+        extra=extra,
     )
 
 
-def smartphone_document(*, name: str, params: WardParams, stderr: WardParams, posterior, rho_s_source: str,
-                        files: dict, inputs: dict, created: str) -> dict:
+def smartphone_document(
+    *,
+    name: str,
+    params: WardParams,
+    stderr: WardParams,
+    posterior,
+    rho_s_source: str,
+    files: dict,
+    inputs: dict,
+    created: str,
+) -> dict:
     """``params.json`` of a smartphone capture: α's posterior under ``fit.posterior``.
 
     Radiance's ``plastic`` takes the estimates as they are: the smartphone α
@@ -102,18 +142,32 @@ def smartphone_document(*, name: str, params: WardParams, stderr: WardParams, po
     lo68, hi68 = post.interval(0.68)
     lo95, hi95 = post.interval(0.95)
     return params_document(
-        name=name, method="smartphone", model="isotropic", normalization="ward1992", params=params, stderr=stderr,
+        name=name,
+        method="smartphone",
+        model="isotropic",
+        normalization="ward1992",
+        params=params,
+        stderr=stderr,
         fit={
             "status": "converged",
             "posterior": {
-                "alpha_mean": float(post.mean), "alpha_median": float(post.median),
-                "alpha_interval_68": [float(lo68), float(hi68)], "alpha_interval_95": [float(lo95), float(hi95)],
+                "alpha_mean": float(post.mean),
+                "alpha_median": float(post.median),
+                "alpha_interval_68": [float(lo68), float(hi68)],
+                "alpha_interval_95": [float(lo95), float(hi95)],
                 "autocorrelation_time": float(max(dict(post.tau).values())),  # the slowest parameter
                 "acceptance": float(np.mean(post.acceptance)),
             },
             "rho_s_source": rho_s_source,
         },
-        radiance={"normalization": "ward1992", "params": params, "stderr": stderr, "status": "converged",
-                  "tangent": [1.0, 0.0]},
-        files=files, inputs=inputs, created=created,
+        radiance={
+            "normalization": "ward1992",
+            "params": params,
+            "stderr": stderr,
+            "status": "converged",
+            "tangent": [1.0, 0.0],
+        },
+        files=files,
+        inputs=inputs,
+        created=created,
     )

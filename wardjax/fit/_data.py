@@ -18,10 +18,17 @@ from .. import _shapes
 from . import _varpro
 
 __all__ = [
-    "SAMPLE_FILL", "bucket_rows", "buckets", "check_choice", "clean", "clean_jit", "moments_chunk", "pad_rows", "pad_samples", "validate",
+    "SAMPLE_FILL",
+    "bucket_rows",
+    "buckets",
+    "check_choice",
+    "clean",
+    "clean_jit",
+    "moments_chunk",
+    "pad_rows",
+    "pad_samples",
+    "validate",
 ]
-
-
 
 
 def check_choice(name, value, allowed):
@@ -128,14 +135,15 @@ SAMPLE_FILL = (np.nan, np.nan, np.nan, False, 0.0)
 
 def pad_samples(data, n: int):
     """``data`` with the sample axis padded to ``n`` by unusable samples (zero weight after :func:`clean`)."""
-    return tuple(None if a is None else _shapes.pad_to_shape(a, a.shape[:1] + (n,), fill)
-                 for a, fill in zip(data, SAMPLE_FILL))
+    return tuple(
+        None if a is None else _shapes.pad_to_shape(a, a.shape[:1] + (n,), fill) for a, fill in zip(data, SAMPLE_FILL)
+    )
 
 
 @functools.partial(jax.jit, static_argnames=("iso",))
 def moments_chunk(f, u, v, g, w, n, *, iso):
-    """:func:`~wardjax._varpro.prepare` of each scanline; ``n`` (traced) samples are data, the rest padding."""
-    return jax.vmap(lambda *a: _varpro.prepare(*a, iso, n))(f, u, v, g, w)
+    """:func:`~wardjax.fit._varpro.prepare` of each scanline; ``n`` (traced) samples are data, the rest padding."""
+    return jax.vmap(lambda *a: _varpro.prepare(*a, iso=iso, n=n))(f, u, v, g, w)
 
 
 def pad_rows(a: np.ndarray, rows: int) -> np.ndarray:

@@ -117,8 +117,9 @@ def _joint_prepare(f, wi, wo, w, n_samples, norm_index):
     # Start: the best of a log-α grid of the joint profiled χ² (for fixed α the
     # joint model is linear in every ρd and the shared ρs), not the per-scanline
     # fits, which a strong texture can spoil.
-    prepared = moments_chunk(jnp.swapaxes(args.f, -1, -2), args.u, args.v, args.g, jnp.swapaxes(args.w, -1, -2),
-                              n_samples, iso=True)
+    prepared = moments_chunk(
+        jnp.swapaxes(args.f, -1, -2), args.u, args.v, args.g, jnp.swapaxes(args.w, -1, -2), n_samples, iso=True
+    )
     return args, prepared
 
 
@@ -135,10 +136,14 @@ def combined(res: ScanlineFit, model: str, *, errors: str, max_steps: int, rtol:
     # Cleaned with both axes padded to bucket sizes (padded samples unusable), so that batches of
     # slightly different shapes share every compiled program below.
     s_true, n_true = res._data[0].shape[:2]
-    data = [None if a is None else _shapes.pad_to_shape(a, (_shapes.bucket(s_true),), fill)
-            for a, fill in zip(pad_samples(res._data, _shapes.bucket(n_true)), SAMPLE_FILL)]
-    f_c, wi_c, wo_c, w_c = (np.asarray(a)[:s_true] for a in clean_jit(
-        *(None if a is None else jnp.asarray(a) for a in data), dtype=np.dtype(np.float64)))
+    data = [
+        None if a is None else _shapes.pad_to_shape(a, (_shapes.bucket(s_true),), fill)
+        for a, fill in zip(pad_samples(res._data, _shapes.bucket(n_true)), SAMPLE_FILL)
+    ]
+    f_c, wi_c, wo_c, w_c = (
+        np.asarray(a)[:s_true]
+        for a in clean_jit(*(None if a is None else jnp.asarray(a) for a in data), dtype=np.dtype(np.float64))
+    )
     # Every scanline with usable data takes part, including those whose own fit
     # saw no lobe: a scanline beside the highlight says where the lobe is *not*,
     # which is exactly what constrains αx.
@@ -148,16 +153,25 @@ def combined(res: ScanlineFit, model: str, *, errors: str, max_steps: int, rtol:
     if n_use == 0:
         nan = WardParams(rho_d=np.full(3, np.nan), rho_s=np.nan, alpha_x=np.nan, alpha_y=np.nan)
         return CombinedFit(
-            nan, nan, np.full((len(res), 3), np.nan), np.full((k + 1, k + 1), np.nan),
-            float("nan"), 0, Status.INSUFFICIENT_DATA, 0, model, res.normalization,
+            nan,
+            nan,
+            np.full((len(res), 3), np.nan),
+            np.full((k + 1, k + 1), np.nan),
+            float("nan"),
+            0,
+            Status.INSUFFICIENT_DATA,
+            0,
+            model,
+            res.normalization,
         )
     # Pad the scanline axis to a bucket size with zero-weight rows: one compile per bucket.
     rows = bucket_rows(n_use, 1 << 30)
     sel = [np.asarray(a)[use] for a in (f_c, wi_c, wo_c, w_c)]
     f_p, wi_p, wo_p, w_p = (pad_rows(a, rows) for a in sel)
     wi_p[n_use:, :, 2] = wo_p[n_use:, :, 2] = 1.0  # padded rows: straight up, weight 0
-    args, prepared = _joint_prepare(f_p, wi_p, wo_p, w_p, np.int32(n_true),
-                                    np.int32(NORMALIZATIONS.index(res.normalization)))
+    args, prepared = _joint_prepare(
+        f_p, wi_p, wo_p, w_p, np.int32(n_true), np.int32(NORMALIZATIONS.index(res.normalization))
+    )
     log_a, rs0 = (float(v) for v in _joint_grid_start(prepared))
     y = jnp.asarray([math.log(max(rs0, 1e-6))] + [log_a] * k, jnp.float64)
     n_obs = int(np.sum(np.broadcast_to(np.asarray(args.w), args.f.shape) > 0))
@@ -166,6 +180,7 @@ def combined(res: ScanlineFit, model: str, *, errors: str, max_steps: int, rtol:
     # produce: certify the optimum with the Gauss–Newton step and restart
     # (resetting the damping) until it is below 1e-3 σ.
     certified = False
+    jac = r = np.empty(0)  # set by the loop's first pass, which always runs
     for _ in range(4):
         y, _ = _solve_joint(y, args, iso, max_steps, rtol)
         jac, r = _joint_jacobian(y, args, iso)

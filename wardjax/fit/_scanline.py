@@ -5,7 +5,7 @@ model, section 3 of the image-based paper):
 
 ``solver="fast"`` (default)
     A fixed-iteration LM on the variable-projection reduction written in JAX
-    (:mod:`wardjax._varpro`): ρd and ρs are solved in closed form, only the
+    (:mod:`wardjax.fit._varpro`): ρd and ρs are solved in closed form, only the
     roughness is iterated, every scanline does the same work under ``vmap``.
 ``solver="optimistix"``
     :class:`optimistix.LevenbergMarquardt` on the full problem in well-scaled
@@ -40,7 +40,7 @@ import optimistix as optx
 
 from .. import _shapes
 from .._status import Status
-from ..ward import NORMALIZATIONS, Normalization, WardParams, ward_geometry
+from ..ward import NORMALIZATIONS, WardParams, ward_geometry
 from . import _varpro
 from ._data import (
     buckets,
@@ -56,7 +56,6 @@ from ._joint import CombinedFit, combined
 __all__ = ["ScanlineFit", "fit_scanlines"]
 
 Model = Literal["isotropic", "anisotropic"]
-Solver = Literal["fast", "optimistix"]
 
 # Rows per compiled chunk: about 3–6 MB per input array. One huge batch is
 # slower; measured here, 1,024 rows beat 4,096 in float32 too (14.3k vs 9.7k
@@ -65,6 +64,7 @@ _CHUNK = {np.dtype(np.float64): 1024, np.dtype(np.float32): 1024}
 
 
 # --------------------------------------------------------------------------- results
+
 
 @dataclasses.dataclass(frozen=True, eq=False)
 class ScanlineFit:
@@ -90,7 +90,7 @@ class ScanlineFit:
     chi2: np.ndarray
     dof: np.ndarray
     status: np.ndarray
-    model: str
+    model: Model
     normalization: str
     solver: str
     _data: tuple = dataclasses.field(repr=False)
@@ -114,9 +114,9 @@ class ScanlineFit:
 
     def combined(
         self,
-        model: Model | None = None,
+        model: str | None = None,
         *,
-        errors: Literal["robust", "model"] = "robust",
+        errors: str = "robust",
         max_steps: int = 256,
         rtol: float = 1e-10,
     ) -> CombinedFit:
@@ -147,7 +147,7 @@ class ScanlineFit:
             *across* neighbouring scanlines (a camera image's columns) that the
             fit partly absorbs into (ρs, α) leaves no trace in the residuals,
             and both covariances then understate the error (5–7× on the
-            simulated marble); :func:`wardjax.pipeline.texture_field_covariance`
+            simulated marble); :func:`wardjax.fit.texture_field_covariance`
             accounts for it, and :func:`wardjax.fit_capture` reports that.
             ``"model"``: the Gauss–Newton covariance scaled by χ²/dof.
         """
@@ -182,12 +182,12 @@ def fit_scanlines(
     f_r,
     wi,
     wo,
-    model: Model = "isotropic",
+    model: str = "isotropic",
     *,
     mask=None,
     weights=None,
-    normalization: Normalization = "ward1992",
-    solver: Solver = "fast",
+    normalization: str = "ward1992",
+    solver: str = "fast",
     dtype=np.float64,
     chunk_size: int | None = None,
 ) -> ScanlineFit:
@@ -245,8 +245,14 @@ def fit_scanlines(
         redo = np.flatnonzero(np.isin(sol.status, (Status.MAX_STEPS, Status.NONFINITE)))
         if redo.size:
             sub = tuple(None if a is None else a[redo] for a in data)
-            again = _solve(sub, iso=iso, normalization=normalization, solver=solver, dtype=np.dtype(np.float64),
-                           chunk=_CHUNK[np.dtype(np.float64)])
+            again = _solve(
+                sub,
+                iso=iso,
+                normalization=normalization,
+                solver=solver,
+                dtype=np.dtype(np.float64),
+                chunk=_CHUNK[np.dtype(np.float64)],
+            )
             for full, part in zip(sol, again):
                 full[redo] = part
     return _assemble(sol, data, model, normalization, solver)
@@ -263,21 +269,22 @@ def _solve(data, *, iso, normalization, solver, dtype, chunk) -> _varpro.Scanlin
     whose scanlines differ a little in length share one compiled program.
     """
     rtol = 0.0 if dtype == np.float64 else 64 * float(np.finfo(dtype).eps)
-    n_true = data[0].shape[1]
+    n_rows, n_true = data[0].shape[0], data[0].shape[1]
+    n_pad = _shapes.bucket(n_true) if solver == "fast" else n_true
     if solver == "fast":
-        data = pad_samples(data, _shapes.bucket(n_true))
+        data = pad_samples(data, n_pad)  # the sample axis only
     with jax.enable_x64(True):
         # Padded: the true count as data (one program per bucket). Not padded: None, the static
         # grid slice, which is tighter than the padded gather (64 grid samples, not 128, at N = 256:
         # ~30 % faster in float32).
-        n = None if data[0].shape[1] == n_true else jnp.asarray(n_true, jnp.int32)
+        n = None if n_pad == n_true else jnp.asarray(n_true, jnp.int32)
         pieces = []
-        for start, stop, rows in buckets(data[0].shape[0], chunk):
+        for start, stop, rows in buckets(n_rows, chunk):
             args = [None if a is None else jax.device_put(pad_rows(a[start:stop], rows)) for a in data]
             if solver == "fast":
-                out = _fast_chunk(*args, n, iso=iso, rtol=rtol, normalization=normalization, dtype=dtype)
+                out = _fast_chunk(*args, n=n, iso=iso, rtol=rtol, normalization=normalization, dtype=dtype)
             else:
-                out = _optimistix_chunk(*clean(*args, dtype), normalization=normalization)
+                out = _optimistix_chunk(*clean(*args, dtype=dtype), normalization=normalization)
             pieces.append((out, stop - start))  # dispatched asynchronously
         sol = [jax.tree_util.tree_map(lambda a, n=n: np.asarray(a)[:n], o) for o, n in pieces]
         return jax.tree_util.tree_map(lambda *a: np.concatenate(a).astype(np.float64), *sol)
@@ -341,7 +348,7 @@ def _optimistix_scanline(f, wi, wo, w, normalization):
     jac_nat = jac / scale_vec[None, :]  # ∂r/∂ρs = ∂r/∂log ρs / ρs, likewise α
     n_obs = jnp.sum(sw > 0)
     dof = n_obs - 5
-    cov = jnp.linalg.inv(jac_nat.T @ jac_nat) * chi2 / jnp.maximum(dof, 1)
+    cov = jnp.linalg.inv(jac_nat.T @ jac_nat) * chi2 / jnp.maximum(dof, 1).astype(chi2.dtype)
     ok = sol.result == optx.RESULTS.successful
     n_samples = jnp.sum(jnp.sum(w, axis=-1) > 0)
     finite = jnp.all(jnp.isfinite(y)) & jnp.isfinite(chi2)
@@ -350,11 +357,9 @@ def _optimistix_scanline(f, wi, wo, w, normalization):
         Status.INSUFFICIENT_DATA,
         jnp.where(~finite, Status.NONFINITE, jnp.where(ok, Status.CONVERGED, Status.MAX_STEPS)),
     ).astype(jnp.int32)
-    return _varpro.ScanlineSolution(
-        y[:3], jnp.exp(y[3]), jnp.exp(y[4:5]), cov, chi2, dof, status
-    )
+    return _varpro.ScanlineSolution(y[:3], jnp.exp(y[3]), jnp.exp(y[4:5]), cov, chi2, dof, status)
 
 
 @functools.partial(jax.jit, static_argnames="normalization")
 def _optimistix_chunk(f, wi, wo, w, *, normalization):
-    return jax.vmap(lambda *a: _optimistix_scanline(*a, normalization))(f, wi, wo, w)
+    return jax.vmap(lambda *a: _optimistix_scanline(*a, normalization=normalization))(f, wi, wo, w)

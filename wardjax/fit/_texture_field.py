@@ -28,7 +28,8 @@ def _fft_shape(n: int) -> int:
     """A length ≥ ``n`` that FFTs fast (2^a 3^b 5^c)."""
     from scipy.fft import next_fast_len
 
-    return next_fast_len(int(n), real=True)
+    # scipy's Python stub of next_fast_len has an empty body (so pyright infers None); the C function returns int.
+    return next_fast_len(int(n), real=True)  # pyright: ignore[reportReturnType]
 
 
 class TextureErrors(NamedTuple):
@@ -75,8 +76,11 @@ def lobe(wi, wo, a, normalization):
     s, n = wi.shape[:2]
     shape = (_shapes.bucket(s), _shapes.bucket(n))
     with jax.enable_x64(True):
-        b, db, valid = _lobe_and_grad(*(jnp.asarray(_shapes.pad_to_shape(d, shape), jnp.float64) for d in (wi, wo)),
-                                      jnp.asarray(a, jnp.float64), normalization)
+        b, db, valid = _lobe_and_grad(
+            *(jnp.asarray(_shapes.pad_to_shape(d, shape), jnp.float64) for d in (wi, wo)),
+            jnp.asarray(a, jnp.float64),
+            normalization,
+        )
     return np.asarray(b)[:s, :n], np.asarray(db)[:, :s, :n], np.asarray(valid)[:s, :n]
 
 
@@ -134,8 +138,9 @@ def texture_field_covariance(F, WI, WO, cols, params: WardParams, model: str, no
     """
     iso = model == "isotropic"
     rs, ax, ay = float(params.rho_s), float(params.alpha_x), float(params.alpha_y)
-    b, dlobe, valid = lobe(np.asarray(WI, np.float64), np.asarray(WO, np.float64), [ax] if iso else [ax, ay],
-                            normalization)
+    b, dlobe, valid = lobe(
+        np.asarray(WI, np.float64), np.asarray(WO, np.float64), [ax] if iso else [ax, ay], normalization
+    )
     F = np.asarray(F, np.float64)
     w = (np.isfinite(F) & valid[..., None]).astype(np.float64)  # (S, N, 3)
     basis = np.concatenate([b[None], rs * dlobe], 0)  # (P, S, N): ∂(ρs b)/∂θ
@@ -162,9 +167,11 @@ def texture_field_covariance(F, WI, WO, cols, params: WardParams, model: str, no
 
     from scipy.fft import irfft2, rfft2
 
-    spec_r = rfft2(on_grid(resid), s=shape, axes=(0, 1))  # (k1, k2, 3)
-    spec_g = rfft2(on_grid(np.moveaxis(g, 0, -2)), s=shape, axes=(0, 1))  # (k1, k2, P, 3)
-    h = irfft2(np.einsum("abc,abpc->abp", np.conj(spec_r), spec_g), s=shape, axes=(0, 1))  # (L1, L2, P)
+    # spec_r (k1, k2, 3), spec_g (k1, k2, P, 3), h (L1, L2, P). scipy.fft's uarray-dispatched
+    # functions are typed as returning tuple[Dispatchable]; they return arrays.
+    spec_r: np.ndarray = rfft2(on_grid(resid), s=shape, axes=(0, 1))  # pyright: ignore[reportAssignmentType]
+    spec_g: np.ndarray = rfft2(on_grid(np.moveaxis(g, 0, -2)), s=shape, axes=(0, 1))  # pyright: ignore[reportAssignmentType]
+    h: np.ndarray = irfft2(np.einsum("abc,abpc->abp", np.conj(spec_r), spec_g), s=shape, axes=(0, 1))  # pyright: ignore[reportAssignmentType]
     cov = np.einsum("abp,abq->pq", h, h) / float(np.mean(n_valid))
     rho_d_grad = -np.pi * mean.mean(axis=1).T  # (3, P): ρ̄d = π mean_s ⟨f − ρs b⟩_s
     rms = float(np.pi * np.sqrt(np.sum(resid**2) / max(float(n_valid.sum()), 1.0)))
@@ -182,9 +189,10 @@ def with_texture_errors(comb: CombinedFit, te: TextureErrors) -> CombinedFit:
         return comb
     se = np.sqrt(np.clip(np.diag(cov), 0.0, None))
     grad = te.rho_d_grad
-    quad = lambda c: np.einsum("ip,pq,iq->i", grad, c, grad)  # noqa: E731
+    quad = lambda c: np.einsum("ip,pq,iq->i", grad, c, grad)
     noise_var = np.clip(np.asarray(comb.stderr.rho_d, float) ** 2 - quad(comb.covariance), 0.0, None)
     iso = comb.model == "isotropic"
-    stderr = WardParams(rho_d=np.sqrt(noise_var + quad(cov)), rho_s=se[0], alpha_x=se[1],
-                        alpha_y=se[1] if iso else se[2])
+    stderr = WardParams(
+        rho_d=np.sqrt(noise_var + quad(cov)), rho_s=se[0], alpha_x=se[1], alpha_y=se[1] if iso else se[2]
+    )
     return dataclasses.replace(comb, stderr=stderr, covariance=cov, errors="texture_field")

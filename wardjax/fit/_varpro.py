@@ -134,7 +134,7 @@ def _grid_subsample(n_pad: int, n):
     if n is None:
         return slice(0, None, max(1, n_pad // GRID_MIN_SAMPLES)), None
     stride = jnp.maximum(n // GRID_MIN_SAMPLES, 1)
-    idx = jnp.arange(min(n_pad, 2 * GRID_MIN_SAMPLES)) * stride
+    idx = jnp.arange(min(n_pad, 2 * GRID_MIN_SAMPLES), dtype=stride.dtype) * stride
     keep = idx < n
     return jnp.where(keep, idx, 0), keep
 
@@ -171,15 +171,33 @@ def prepare(f, u, v, g, w, iso: bool = True, n=None) -> Prepared:
     sub, keep = _grid_subsample(n_pad, n)
 
     def pick(a):  # (..., N) → (..., G): the subsample, slots past the data weighted 0
-        if n is None:
+        if keep is None:  # n is None: a static slice of data samples
             return a[..., sub]
         return jnp.where(jnp.reshape(keep, (1,) * (a.ndim - 1) + keep.shape), a[..., sub], 0.0)
 
     grid_wsum = jnp.sum(pick(w), axis=-1)
     grid_wsum = jnp.where(grid_wsum > 0, grid_wsum, 1.0)
     grid_fsum = jnp.sum(pick(w * ft), axis=-1)
-    return Prepared(x, gw, gwf, g2w, wsum, fbar, k0, channels_ok, has, n_obs, n_samples, theta_guess,
-                    pick(gw), pick(gwf), pick(g2w), t[sub], grid_wsum, grid_fsum)
+    return Prepared(
+        x,
+        gw,
+        gwf,
+        g2w,
+        wsum,
+        fbar,
+        k0,
+        channels_ok,
+        has,
+        n_obs,
+        n_samples,
+        theta_guess,
+        pick(gw),
+        pick(gwf),
+        pick(g2w),
+        t[sub],
+        grid_wsum,
+        grid_fsum,
+    )
 
 
 def basis(theta, u, v, g, iso: bool):
@@ -259,17 +277,19 @@ def stats(theta, p: Prepared, iso: bool, with_jac: bool = True) -> Stats:
         z = jnp.zeros((k,), chi2.dtype)
         zz = jnp.zeros((k, k), chi2.dtype)
         return Stats(chi2, s, sbf, sbb, zz, z, z, zz, bbar, jnp.zeros((c_, k), chi2.dtype))
-    bs = lambda y: p.gw @ (e * y)  # noqa: E731  (C,)
-    ps = lambda y: p.gwf @ (e * y)  # noqa: E731
-    qs = lambda y: p.g2w @ (e2 * y)  # noqa: E731
+    bs = lambda y: p.gw @ (e * y)
+    ps = lambda y: p.gwf @ (e * y)
+    qs = lambda y: p.g2w @ (e2 * y)
     b0, p0, q0 = bsum / q, psum / q, qsum / (q * q)
     if iso:
+        t = p.x[0]  # read again (XLA shares the slice): each branch binds the geometry it uses
         qt = qs(t)
         bp = q * (2 * inv * bs(t) - 2 * b0)[:, None]  # (C, 1)
         pp = q * (2 * inv * ps(t) - 2 * p0)[None]  # (1,)
         qp = q * q * (2 * inv * qt - 2 * q0)[None]
         rp = (q * q * (4 * inv * inv * qs(t * t) - 8 * inv * qt + 4 * q0))[None, None]
     else:
+        u, v = p.x[0], p.x[1]
         qu, qv = qs(u), qs(v)
         bp = q * jnp.stack([2 * ix * bs(u) - b0, 2 * iy * bs(v) - b0], -1)  # (C, 2)
         pp = q * jnp.stack([2 * ix * ps(u) - p0, 2 * iy * ps(v) - p0])
@@ -448,7 +468,7 @@ def solve_scanline(p: Prepared, *, iso: bool, rtol: float) -> ScanlineSolution:
     dof = p.n_obs - n_par
     s = st.s
     rho_d = jnp.pi * (p.fbar - s * jnp.broadcast_to(st.bbar, (3,)))
-    scale = st.chi2 / jnp.maximum(dof, 1)
+    scale = st.chi2 / jnp.maximum(dof, 1).astype(st.chi2.dtype)
     cov = covariance(theta, st, p, scale)
 
     # Convergence: the remaining Gauss–Newton step versus the standard error.

@@ -16,6 +16,7 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 import numpy as np
+from numpy.typing import DTypeLike
 
 from .. import _shapes
 from ..geometry import band_geometry_jnp, rig_constants
@@ -51,8 +52,10 @@ def _bbox(mask: np.ndarray, pad: int) -> tuple[slice, slice] | None:
         return None
     cols = np.flatnonzero(mask.any(axis=0))
     h, w = mask.shape
-    return (slice(max(rows[0] - pad, 0), min(rows[-1] + 1 + pad, h)),
-            slice(max(cols[0] - pad, 0), min(cols[-1] + 1 + pad, w)))
+    return (
+        slice(max(rows[0] - pad, 0), min(rows[-1] + 1 + pad, h)),
+        slice(max(cols[0] - pad, 0), min(cols[-1] + 1 + pad, w)),
+    )
 
 
 class Reconstruction(NamedTuple):
@@ -107,7 +110,7 @@ def _sample_bilinear_jnp(image, uv, size):
     u0 = jnp.minimum(jnp.floor(us).astype(jnp.int32), jnp.maximum(w - 2, 0))
     v0 = jnp.minimum(jnp.floor(vs).astype(jnp.int32), jnp.maximum(h - 2, 0))
     u1, v1 = jnp.minimum(u0 + 1, w - 1), jnp.minimum(v0 + 1, h - 1)
-    fu, fv = (us - u0)[..., None], (vs - v0)[..., None]
+    fu, fv = (us - u0.astype(us.dtype))[..., None], (vs - v0.astype(vs.dtype))[..., None]
     i00, i01, i10, i11 = image[v0, u0], image[v0, u1], image[v1, u0], image[v1, u1]
     c = c3 - 3
     out = (i00[..., :c] * (1 - fu) + i01[..., :c] * fu) * (1 - fv) + (i10[..., :c] * (1 - fu) + i11[..., :c] * fu) * fv
@@ -123,8 +126,24 @@ def _masks_kernel(k, rows, *, width: int, height: int):
 
 
 @functools.partial(jax.jit, static_argnames=("width", "height", "ncols"))
-def _reconstruct_band(k, rows, col0, lit, dark, clipped, std, std_size, offset, rho, noise_floor, saturation, *,
-                      width: int, height: int, ncols: int):
+def _reconstruct_band(
+    k,
+    rows,
+    col0,
+    lit,
+    dark,
+    clipped,
+    std,
+    std_size,
+    offset,
+    rho,
+    noise_floor,
+    saturation,
+    *,
+    width: int,
+    height: int,
+    ncols: int,
+):
     """Geometry, mirror sampling and eq. "f_r,measured" of a band of rows, fused (dtype of ``k``).
 
     The same computation as :func:`~wardjax.geometry.pixel_geometry`,
@@ -153,10 +172,13 @@ def _reconstruct_band(k, rows, col0, lit, dark, clipped, std, std_size, offset, 
     num = lit.astype(k.dtype) - dark.astype(k.dtype)
     den = v_std - v_std_bg
     finite = jnp.isfinite(num) & jnp.isfinite(den)
-    u8 = lambda cond, reason: jnp.where(cond, jnp.uint8(reason), jnp.uint8(0))  # noqa: E731
-    fl = (u8(~finite, MaskReason.NONFINITE) | u8(~mok[..., None], MaskReason.OFF_STANDARD)
-          | u8(clipped | clip_std, MaskReason.SATURATED)
-          | u8(finite & ((num < noise_floor) | (den < noise_floor) | (den <= 0)), MaskReason.BELOW_NOISE))
+    u8 = lambda cond, reason: jnp.where(cond, jnp.uint8(reason), jnp.uint8(0))
+    fl = (
+        u8(~finite, MaskReason.NONFINITE)
+        | u8(~mok[..., None], MaskReason.OFF_STANDARD)
+        | u8(clipped | clip_std, MaskReason.SATURATED)
+        | u8(finite & ((num < noise_floor) | (den < noise_floor) | (den <= 0)), MaskReason.BELOW_NOISE)
+    )
     ok = (fl == 0) & probe[..., None]
     f_r = jnp.where(ok, num / jnp.where(ok, den, 1.0) * (rho / jnp.pi)[None, None, :], jnp.nan)
     num_sat = saturation - dark.astype(k.dtype)
@@ -169,7 +191,9 @@ def _reconstruct_band(k, rows, col0, lit, dark, clipped, std, std_size, offset, 
     return f_r, flags, wi, wo, pts, f_clip  # which pixels see the probe: the first pass already has it
 
 
-def reconstruct_capture(cap, *, band_rows: int = 512, dtype=np.float32, clip_bounds: bool = False) -> Reconstruction:
+def reconstruct_capture(
+    cap, *, band_rows: int = 512, dtype: DTypeLike = np.float32, clip_bounds: bool = False
+) -> Reconstruction:
     """Reconstruct ``f_r`` for every probe pixel of a ``method = "scanline"`` capture.
 
     Two passes over bands of ``band_rows`` rows, each one compiled program
@@ -237,9 +261,21 @@ def reconstruct_capture(cap, *, band_rows: int = 512, dtype=np.float32, clip_bou
             r1 = min(r0 + step, rows_p.stop)
             n, m, sl = r1 - r0, cols.stop - cols.start, (slice(r0, r1), cols)
             dark = zeros if cap.dark is None else pad(cap.dark[sl], band)
-            out = _reconstruct_band(k, np.arange(r0, r0 + band[0], dtype=dtype), jnp.asarray(cols.start, dtype),
-                                    pad(cap.lit[sl], band), dark, pad(cap.lit_clipped[sl], band),
-                                    std, std_size, offset, rho, nf, sat, **kw)
+            out = _reconstruct_band(
+                k,
+                np.arange(r0, r0 + band[0], dtype=dtype),
+                jnp.asarray(cols.start, dtype),
+                pad(cap.lit[sl], band),
+                dark,
+                pad(cap.lit_clipped[sl], band),
+                std,
+                std_size,
+                offset,
+                rho,
+                nf,
+                sat,
+                **kw,
+            )
             for dst, src in zip((f_r, flags, wi, wo, points, f_clip), out):
                 if dst is not None:
                     dst[sl] = np.asarray(src)[:n, :m]

@@ -107,5 +107,5 @@ def bin_scanlines(rec: Reconstruction, max_samples: int) -> ScanlineBins:
         d /= np.where(nrm > 0, nrm, 1.0)
         d[nrm[..., 0] == 0] = (0.0, 0.0, 1.0)
     p_bin = total(np.nan_to_num(rec.points[box]), 0.0) / n_p
-    scan = lambda a: np.ascontiguousarray(a.transpose(1, 0, 2))  # noqa: E731
+    scan = lambda a: np.ascontiguousarray(a.transpose(1, 0, 2))
     return ScanlineBins(scan(f_bin), scan(cens), scan(wi_bin), scan(wo_bin), scan(p_bin), b, box)

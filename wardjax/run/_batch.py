@@ -24,40 +24,46 @@ import json
 from collections.abc import Callable
 from pathlib import Path
 
-from .._files import sha256, write_bytes_atomic
+from .._files import remove_temporaries, sha256, write_bytes_atomic
 from ..capture import CAPTURE_FILE, CaptureError, load_capture
 from ..export import write_capture_outputs
+from ._fit_capture import fit_capture
+from ._smartphone import fit_smartphone_capture
 
 __all__ = ["BatchItem", "find_captures", "run_batch", "SUMMARY_COLUMNS"]
 
 SUMMARY_COLUMNS = (
-    "capture", "status", "method", "model", "normalization",
-    "rho_d_r", "rho_d_g", "rho_d_b", "rho_s", "alpha_x", "alpha_y",
-    "rho_d_r_err", "rho_d_g_err", "rho_d_b_err", "rho_s_err", "alpha_x_err", "alpha_y_err",
-    "fit_status", "reduced_chi2", "valid_pixels", "error", "source",
+    "capture",
+    "status",
+    "method",
+    "model",
+    "normalization",
+    "rho_d_r",
+    "rho_d_g",
+    "rho_d_b",
+    "rho_s",
+    "alpha_x",
+    "alpha_y",
+    "rho_d_r_err",
+    "rho_d_g_err",
+    "rho_d_b_err",
+    "rho_s_err",
+    "alpha_x_err",
+    "alpha_y_err",
+    "fit_status",
+    "reduced_chi2",
+    "valid_pixels",
+    "error",
+    "source",
 )
-
-# Fitters by capture method. The smartphone method registers its function here
-# when it lands (see the hook in wardjax.capture.parse_capture_file).
-FITTERS: dict[str, Callable] = {}
 
 
 def _fit_scanline(cap, out_dir: Path, created: str) -> dict:
-    from ._fit_capture import fit_capture
-
     return write_capture_outputs(fit_capture(cap), out_dir, created=created)
 
 
-FITTERS["scanline"] = _fit_scanline
-
-
-def _fit_smartphone(cap, out_dir: Path, created: str) -> dict:
-    from ._smartphone import fit_smartphone_capture
-
-    return fit_smartphone_capture(cap, out_dir, created=created)
-
-
-FITTERS["smartphone"] = _fit_smartphone
+# Fitters by capture method (``method`` in capture.toml): each fits a loaded capture and writes its outputs.
+FITTERS: dict[str, Callable] = {"scanline": _fit_scanline, "smartphone": fit_smartphone_capture}
 
 
 @dataclasses.dataclass(frozen=True)
@@ -120,24 +126,21 @@ def _finished(source: Path, out_dir: Path) -> dict | None:
     return doc
 
 
-def _clean_temporaries(out_dir: Path) -> None:
-    if out_dir.is_dir():
-        for f in out_dir.iterdir():
-            if f.name.startswith(".") and f.name.endswith(".tmp") and f.is_file():
-                f.unlink()
-
-
 def _row(item: BatchItem) -> dict:
     row = {k: "" for k in SUMMARY_COLUMNS}
     row.update(capture=item.name, status=item.status, error=item.error, source=str(item.source))
     d = item.params
     if d:
         p, e = d["params"], d["stderr"]
-        row.update(method=d["method"], model=d["model"], normalization=d["normalization"],
-                   fit_status=d["fit"]["status"],
-                   # methods without a least-squares fit (smartphone) have neither
-                   reduced_chi2=_num(d["fit"].get("reduced_chi2")),
-                   valid_pixels=d["fit"].get("diagnostics", {}).get("pixels", {}).get("valid", ""))
+        row.update(
+            method=d["method"],
+            model=d["model"],
+            normalization=d["normalization"],
+            fit_status=d["fit"]["status"],
+            # methods without a least-squares fit (smartphone) have neither
+            reduced_chi2=_num(d["fit"].get("reduced_chi2")),
+            valid_pixels=d["fit"].get("diagnostics", {}).get("pixels", {}).get("valid", ""),
+        )
         for src, suffix in ((p, ""), (e, "_err")):
             for i, ch in enumerate("rgb"):
                 row[f"rho_d_{ch}{suffix}"] = _num(src["rho_d"][i])
@@ -198,13 +201,13 @@ def run_batch(
     out.mkdir(parents=True, exist_ok=True)
     captures = find_captures(paths)
     names = _names(captures)
-    created = datetime.datetime.now(datetime.timezone.utc).replace(microsecond=0).isoformat().replace("+00:00", "Z")
+    created = datetime.datetime.now(datetime.UTC).replace(microsecond=0).isoformat().replace("+00:00", "Z")
     items: list[BatchItem] = []
     for i, (src, name) in enumerate(zip(captures, names)):
         if on_start:
             on_start(i, len(captures), name)
         out_dir = out / name
-        _clean_temporaries(out_dir)
+        remove_temporaries(out_dir)
         doc = None if force else _finished(src, out_dir)
         if doc is not None:
             item = BatchItem(src, name, "ok", skipped=True, params=doc)
@@ -214,7 +217,7 @@ def run_batch(
                 fitter = FITTERS.get(cap.method)
                 if fitter is None:
                     raise CaptureError(CAPTURE_FILE, "method", f"no fitter for method {cap.method!r}")
-                doc = fitter(cap, out_dir, created)
+                doc = fitter(cap, out_dir, created=created)
                 item = BatchItem(src, name, "ok", params=doc)
             except Exception as e:  # a bad capture must not sink the batch
                 item = BatchItem(src, name, "error", error=_one_line(e))

@@ -21,11 +21,21 @@ console = Console()
 
 @click.group(context_settings={"help_option_names": ["-h", "--help"]})
 @click.version_option(package_name="wardjax")
-@click.option("--cache-dir", type=click.Path(file_okay=False, path_type=Path), envvar="WARDJAX_CACHE_DIR",
-              default=None, show_envvar=True,
-              help="Where compiled kernels are kept between runs [default: the user cache folder].")
-@click.option("--no-cache", is_flag=True, envvar="WARDJAX_NO_CACHE", show_envvar=True,
-              help="Compile afresh and keep nothing between runs.")
+@click.option(
+    "--cache-dir",
+    type=click.Path(file_okay=False, path_type=Path),
+    envvar="WARDJAX_CACHE_DIR",
+    default=None,
+    show_envvar=True,
+    help="Where compiled kernels are kept between runs [default: the user cache folder].",
+)
+@click.option(
+    "--no-cache",
+    is_flag=True,
+    envvar="WARDJAX_NO_CACHE",
+    show_envvar=True,
+    help="Compile afresh and keep nothing between runs.",
+)
 def main(cache_dir: Path | None, no_cache: bool) -> None:
     """Measure Ward BRDF parameters from photographs, with honest uncertainties."""
     if not no_cache:
@@ -66,8 +76,14 @@ def _fail(message: str) -> None:
 
 
 @main.command()
-@click.option("--out", "out_dir", type=click.Path(file_okay=False, path_type=Path), default=Path("demo-output"),
-              show_default=True, help="Folder for the simulated captures and the results.")
+@click.option(
+    "--out",
+    "out_dir",
+    type=click.Path(file_okay=False, path_type=Path),
+    default=Path("demo-output"),
+    show_default=True,
+    help="Folder for the simulated captures and the results.",
+)
 @click.option("--seed", type=int, default=0, show_default=True)
 def demo(out_dir: Path, seed: int) -> None:
     """Simulate the desk and marble captures of the paper's Table 1, fit them, compare with the truth."""
@@ -80,14 +96,28 @@ def demo(out_dir: Path, seed: int) -> None:
 
 
 @main.command()
-@click.option("--display", "display_name", default="iphone5s", show_default=True,
-              help="Display in calibration/smartphone_setup.toml.")
-@click.option("--viewing", "viewing_name", default="paper", show_default=True,
-              help="Viewing geometry in calibration/smartphone_setup.toml (for the CPD column).")
-@click.option("--out", "out_dir", type=click.Path(file_okay=False, path_type=Path), required=True,
-              help="Folder for the PNG set and gratings.csv.")
-@click.option("--orientation", type=click.Choice(["vertical", "horizontal"]), default="vertical",
-              show_default=True)
+@click.option(
+    "--display",
+    "display_name",
+    default="iphone5s",
+    show_default=True,
+    help="Display in calibration/smartphone_setup.toml.",
+)
+@click.option(
+    "--viewing",
+    "viewing_name",
+    default="paper",
+    show_default=True,
+    help="Viewing geometry in calibration/smartphone_setup.toml (for the CPD column).",
+)
+@click.option(
+    "--out",
+    "out_dir",
+    type=click.Path(file_okay=False, path_type=Path),
+    required=True,
+    help="Folder for the PNG set and gratings.csv.",
+)
+@click.option("--orientation", type=click.Choice(["vertical", "horizontal"]), default="vertical", show_default=True)
 def gratings(display_name: str, viewing_name: str, out_dir: Path, orientation: str) -> None:
     """Write the square-wave grating PNGs (1 PNG per whole PPB) to load onto the phone."""
     from ..smartphone import write_gratings
@@ -102,13 +132,18 @@ def gratings(display_name: str, viewing_name: str, out_dir: Path, orientation: s
 # --------------------------------------------------------------------------- end gratings
 
 
-# --------------------------------------------------------------------------- capture pipeline (issue 3)
+# --------------------------------------------------------------------------- fitting and simulating captures
 
 
 @main.command("fit")
 @click.argument("paths", nargs=-1, required=True, type=click.Path(path_type=Path))
-@click.option("--out", "out_dir", type=click.Path(file_okay=False, path_type=Path), required=True,
-              help="Folder for the results: one subfolder per capture and summary.csv.")
+@click.option(
+    "--out",
+    "out_dir",
+    type=click.Path(file_okay=False, path_type=Path),
+    required=True,
+    help="Folder for the results: one subfolder per capture and summary.csv.",
+)
 @click.option("--force", is_flag=True, help="Refit captures whose results are already complete.")
 @click.option("--quiet", is_flag=True, help="No progress bar or table.")
 def fit_cmd(paths: tuple[Path, ...], out_dir: Path, force: bool, quiet: bool) -> None:
@@ -127,8 +162,15 @@ def fit_cmd(paths: tuple[Path, ...], out_dir: Path, force: bool, quiet: bool) ->
     if missing:
         err.print(f"[bold red]error:[/] {missing[0]}: no such capture folder", highlight=False, soft_wrap=True)
         sys.exit(2)
-    with Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
-                  console=err, disable=quiet, transient=True) as bar:
+    with Progress(
+        TextColumn("{task.description}"),
+        BarColumn(),
+        MofNCompleteColumn(),
+        TimeElapsedColumn(),
+        console=err,
+        disable=quiet,
+        transient=True,
+    ) as bar:
         task = bar.add_task("fitting", total=None)
 
         def on_start(i, n, name):
@@ -149,10 +191,16 @@ def fit_cmd(paths: tuple[Path, ...], out_dir: Path, force: bool, quiet: bool) ->
         for it in items:
             if it.params:
                 p, e = it.params["params"], it.params["stderr"]
-                pm = lambda k: f"{p[k]:.4f} ± {e[k]:.4f}" if p[k] is not None and e[k] is not None else "–"  # noqa: E731
+                pm = lambda k: f"{p[k]:.4f} ± {e[k]:.4f}" if p[k] is not None and e[k] is not None else "–"
                 rc = it.params["fit"].get("reduced_chi2")  # none for the smartphone method
-                t.add_row(it.name, "skipped (done)" if it.skipped else "ok", pm("rho_s"), pm("alpha_x"),
-                          pm("alpha_y"), f"{rc:.3g}" if rc is not None else "–")
+                t.add_row(
+                    it.name,
+                    "skipped (done)" if it.skipped else "ok",
+                    pm("rho_s"),
+                    pm("alpha_x"),
+                    pm("alpha_y"),
+                    f"{rc:.3g}" if rc is not None else "–",
+                )
             else:
                 t.add_row(it.name, "[red]error[/]", "", "", "", "")
         console.print(t)
@@ -162,8 +210,12 @@ def fit_cmd(paths: tuple[Path, ...], out_dir: Path, force: bool, quiet: bool) ->
 
 @main.command("simulate")
 @click.argument("out_dir", type=click.Path(file_okay=False, path_type=Path))
-@click.option("--material", type=click.Choice(["desk", "marble"]), default=None,
-              help="Take the parameters of the image-based paper's Table 1.")
+@click.option(
+    "--material",
+    type=click.Choice(["desk", "marble"]),
+    default=None,
+    help="Take the parameters of the image-based paper's Table 1.",
+)
 @click.option("--rho-d", nargs=3, type=float, default=(0.6, 0.5, 0.4), show_default=True)
 @click.option("--rho-s", type=float, default=0.04, show_default=True)
 @click.option("--alpha-x", type=float, default=0.12, show_default=True)
@@ -172,31 +224,51 @@ def fit_cmd(paths: tuple[Path, ...], out_dir: Path, force: bool, quiet: bool) ->
 @click.option("--encoding", type=click.Choice(["srgb", "gamma2.2", "linear"]), default="srgb", show_default=True)
 @click.option("--bit-depth", type=click.Choice(["8", "16"]), default="8", show_default=True)
 @click.option("--format", "image_format", type=click.Choice(["png", "tif", "jpg"]), default="png", show_default=True)
-@click.option("--size", nargs=2, type=click.IntRange(16, 20000), default=(320, 240), show_default=True,
-              help="Image width and height in pixels.")
+@click.option(
+    "--size",
+    nargs=2,
+    type=click.IntRange(16, 20000),
+    default=(320, 240),
+    show_default=True,
+    help="Image width and height in pixels.",
+)
 @click.option("--seed", type=int, default=0, show_default=True)
-def simulate_cmd(out_dir, material, rho_d, rho_s, alpha_x, alpha_y, texture, encoding, bit_depth, image_format,
-                 size, seed) -> None:
+def simulate_cmd(
+    out_dir, material, rho_d, rho_s, alpha_x, alpha_y, texture, encoding, bit_depth, image_format, size, seed
+) -> None:
     """Write a simulated capture folder (lit/dark images + capture.toml + truth) to OUT_DIR."""
     from .._data import table1_materials
     from ..simulate import simulate_capture
     from ..ward import WardParams
 
-    p = table1_materials()[material] if material else WardParams(rho_d=rho_d, rho_s=rho_s, alpha_x=alpha_x,
-                                                                   alpha_y=alpha_y)
+    p = (
+        table1_materials()[material]
+        if material
+        else WardParams(rho_d=rho_d, rho_s=rho_s, alpha_x=alpha_x, alpha_y=alpha_y)
+    )
     try:
-        cap = simulate_capture(p, out_dir, seed=seed, image_size=tuple(size), texture=texture, encoding=encoding,
-                               bit_depth=int(bit_depth), image_format=image_format)
+        cap = simulate_capture(
+            p,
+            out_dir,
+            seed=seed,
+            image_size=tuple(size),
+            texture=texture,
+            encoding=encoding,
+            bit_depth=int(bit_depth),
+            image_format=image_format,
+        )
     except ValueError as e:
         _fail(str(e).splitlines()[0])
-    console.print(f"wrote capture [bold]{cap.name}[/] ({cap.rig.camera.width}×{cap.rig.camera.height}, "
-                  f"{encoding} {bit_depth}-bit {image_format}) to {out_dir}/")
+    console.print(
+        f"wrote capture [bold]{cap.name}[/] ({cap.rig.camera.width}×{cap.rig.camera.height}, "
+        f"{encoding} {bit_depth}-bit {image_format}) to {out_dir}/"
+    )
 
 
 # --------------------------------------------------------------------------- end capture pipeline
 
 
-# --------------------------------------------------------------------------- texture (issue 6)
+# --------------------------------------------------------------------------- texture
 
 
 def _parse_region(text: str | None) -> tuple[int, int, int, int] | None:
@@ -230,30 +302,51 @@ def texture() -> None:
 
 @texture.command("analyze")
 @click.argument("rho_d_path", metavar="RHO_D", type=click.Path(path_type=Path))
-@click.option("-o", "--out", "out_path", type=click.Path(dir_okay=False, path_type=Path), required=True,
-              help="Texture description to write: .json or .npz.")
-@click.option("--region", default=None, metavar="Y0:Y1,X0:X1",
-              help="Pixels to analyse (default: the largest rectangle of valid pixels).")
+@click.option(
+    "-o",
+    "--out",
+    "out_path",
+    type=click.Path(dir_okay=False, path_type=Path),
+    required=True,
+    help="Texture description to write: .json or .npz.",
+)
+@click.option(
+    "--region",
+    default=None,
+    metavar="Y0:Y1,X0:X1",
+    help="Pixels to analyse (default: the largest rectangle of valid pixels).",
+)
 @click.option("--height", type=int, default=None, help="Pyramid levels (default: up to 4, as the region allows).")
-@click.option("--quantiles", type=click.IntRange(2, 4097), default=129, show_default=True,
-              help="Entries per quantile table.")
-@click.option("--rho-s", type=float, default=0.0, show_default=True,
-              help="Specular reflectance; synthesis clamps ρd to [0, 1 − ρs].")
-def texture_analyze(rho_d_path: Path, out_path: Path, region: str | None, height: int | None, quantiles: int,
-                    rho_s: float) -> None:
+@click.option(
+    "--quantiles", type=click.IntRange(2, 4097), default=129, show_default=True, help="Entries per quantile table."
+)
+@click.option(
+    "--rho-s",
+    type=float,
+    default=0.0,
+    show_default=True,
+    help="Specular reflectance; synthesis clamps ρd to [0, 1 − ρs].",
+)
+def texture_analyze(
+    rho_d_path: Path, out_path: Path, region: str | None, height: int | None, quantiles: int, rho_s: float
+) -> None:
     """Describe the ρd texture in RHO_D (a linear .tif/.npy, NaN = no data) by its subband histograms."""
     from ..texture import analyze_texture, read_rho_d
 
     try:
-        model = analyze_texture(read_rho_d(rho_d_path), region=_parse_region(region), height=height,
-                                n_quantiles=quantiles, rho_s=rho_s)
+        model = analyze_texture(
+            read_rho_d(rho_d_path), region=_parse_region(region), height=height, n_quantiles=quantiles, rho_s=rho_s
+        )
         model.save(out_path)
     except ValueError as e:
         _fail(str(e).splitlines()[0])
     console.print(f"analysed {model.describe_region()}", highlight=False, soft_wrap=True)
-    console.print(f"{model.channels} channel(s), {model.height} pyramid levels, {len(model.band_names)} subbands, "
-                  f"{model.n_quantiles} quantiles each; wrote {out_path} ({out_path.stat().st_size / 1024:.0f} KiB)",
-                  highlight=False, soft_wrap=True)
+    console.print(
+        f"{model.channels} channel(s), {model.height} pyramid levels, {len(model.band_names)} subbands, "
+        f"{model.n_quantiles} quantiles each; wrote {out_path} ({out_path.stat().st_size / 1024:.0f} KiB)",
+        highlight=False,
+        soft_wrap=True,
+    )
 
 
 @texture.command("synthesize")
@@ -261,8 +354,14 @@ def texture_analyze(rho_d_path: Path, out_path: Path, region: str | None, height
 @click.option("--size", required=True, metavar="WIDTHxHEIGHT", help="Output size in pixels, e.g. 2048x1024.")
 @click.option("--seed", type=int, default=0, show_default=True)
 @click.option("--iterations", type=click.IntRange(1, 100), default=5, show_default=True)
-@click.option("-o", "--out", "out_path", type=click.Path(dir_okay=False, path_type=Path), required=True,
-              help=".tif: linear float ρd; .png: 8-bit sRGB view.")
+@click.option(
+    "-o",
+    "--out",
+    "out_path",
+    type=click.Path(dir_okay=False, path_type=Path),
+    required=True,
+    help=".tif: linear float ρd; .png: 8-bit sRGB view.",
+)
 def texture_synthesize(model_path: Path, size: str, seed: int, iterations: int, out_path: Path) -> None:
     """Synthesise a seamlessly tiling ρd texture of any size from a TEXTURE description."""
     from ..texture import TextureModel, synthesize_texture, write_texture_image
@@ -274,37 +373,58 @@ def texture_synthesize(model_path: Path, size: str, seed: int, iterations: int, 
 
     try:
         model = TextureModel.load(model_path)
-        with Progress(TextColumn("synthesising"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
-                      console=Console(stderr=True), transient=True) as bar:
+        with Progress(
+            TextColumn("synthesising"),
+            BarColumn(),
+            MofNCompleteColumn(),
+            TimeElapsedColumn(),
+            console=Console(stderr=True),
+            transient=True,
+        ) as bar:
             task = bar.add_task("", total=iterations)
-            result = synthesize_texture(model, shape, seed=seed, iterations=iterations,
-                                        progress=lambda k, n: bar.update(task, completed=k))
+            result = synthesize_texture(
+                model, shape, seed=seed, iterations=iterations, progress=lambda k, n: bar.update(task, completed=k)
+            )
         write_texture_image(out_path, result.image)
     except ValueError as e:
         _fail(str(e).splitlines()[0])
     dist = " ".join(f"{d:.3f}" for d in result.distance)
-    console.print(f"subband KS distance: start {result.initial_distance:.3f}, per iteration {dist}", highlight=False,
-                  soft_wrap=True)
+    console.print(
+        f"subband KS distance: start {result.initial_distance:.3f}, per iteration {dist}",
+        highlight=False,
+        soft_wrap=True,
+    )
     console.print(f"wrote {out_path} ({shape[1]}x{shape[0]}, seed {seed})", highlight=False, soft_wrap=True)
 
 
 # --------------------------------------------------------------------------- end texture
 
 
-# --------------------------------------------------------------------------- diagnose (issue 5: missing effects)
+# --------------------------------------------------------------------------- diagnose: missing effects
 
 
 @main.command("diagnose")
 @click.argument("capture", type=click.Path(path_type=Path))
-@click.option("--out", "out_dir", type=click.Path(file_okay=False, path_type=Path), required=True,
-              help="Folder for report.json, report.md and the PNGs.")
-@click.option("--max-steps", type=click.IntRange(0, 10), default=4, show_default=True,
-              help="At most this many effects are added.")
-@click.option("--max-samples", type=click.IntRange(100, 10_000_000), default=20_000, show_default=True,
-              help="Bin the probe to at most this many pixels per channel.")
+@click.option(
+    "--out",
+    "out_dir",
+    type=click.Path(file_okay=False, path_type=Path),
+    required=True,
+    help="Folder for report.json, report.md and the PNGs.",
+)
+@click.option(
+    "--max-steps", type=click.IntRange(0, 10), default=4, show_default=True, help="At most this many effects are added."
+)
+@click.option(
+    "--max-samples",
+    type=click.IntRange(100, 10_000_000),
+    default=20_000,
+    show_default=True,
+    help="Bin the probe to at most this many pixels per channel.",
+)
 def diagnose_cmd(capture: Path, out_dir: Path, max_steps: int, max_samples: int) -> None:
     """Find the effects a capture needs beyond the Ward model: report.json, report.md, residual plots."""
-    from ..capture import CaptureError, load_capture
+    from ..capture import CAPTURE_FILE, Capture, CaptureError, load_capture
     from ..effects import ScanlineModel, discover
     from ..effects._capture import capture_data
 
@@ -312,6 +432,8 @@ def diagnose_cmd(capture: Path, out_dir: Path, max_steps: int, max_samples: int)
         _fail(f"{capture}: no such capture folder")
     try:
         cap = load_capture(capture)
+        if not isinstance(cap, Capture):
+            raise CaptureError(CAPTURE_FILE, "method", f"diagnose reads method = 'scanline', got {cap.method!r}")
         data = capture_data(cap, max_samples=max_samples)
         rep = discover(ScanlineModel(cap.config.fit.normalization), data, max_steps=max_steps)
         rep.save(out_dir, extra={"capture": cap.name})
@@ -326,4 +448,3 @@ def diagnose_cmd(capture: Path, out_dir: Path, max_steps: int, max_samples: int)
 
 if __name__ == "__main__":  # pragma: no cover
     main()
-

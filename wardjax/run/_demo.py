@@ -4,7 +4,7 @@
    anisotropic as tabulated, grey ρd, with a wood-like and a marble-like
    texture) as capture folders in ``OUT/captures/`` — only if not present.
 2. Fit them exactly as ``wardjax fit OUT/captures --out OUT/fits`` does
-   (:func:`wardjax.batch.run_batch`): params.json, ρd texture, scanline plot,
+   (:func:`wardjax.run.run_batch`): params.json, ρd texture, scanline plot,
    Radiance material per capture, and ``summary.csv``.
 3. Print true vs fitted ± 1σ.
 4. Synthesise a 512×512 tile from the marble's ``texture.json`` (section 4.2 of
@@ -21,6 +21,10 @@ from rich.table import Table
 
 from .._data import table1_materials
 from .._files import write_json_atomic
+from ..capture import CAPTURE_FILE
+from ..simulate import simulate_capture
+from ..texture import TextureModel, synthesize_texture, write_texture_image
+from ._batch import run_batch
 
 __all__ = ["run_capture_demo", "write_json_atomic"]
 
@@ -65,9 +69,6 @@ def _true_mean_rho_d(capture: Path, fit: Path) -> float | None:
 
 def run_capture_demo(out_dir, *, seed: int = 0, image_size=(480, 360), console: Console | None = None) -> dict:
     """Simulate (if absent), fit and compare the Table 1 captures; return ``{name: params.json document}``."""
-    from ..capture import CAPTURE_FILE
-    from ..simulate import simulate_capture
-    from ._batch import run_batch
 
     console = console or Console()
     out_dir = Path(out_dir)
@@ -77,8 +78,15 @@ def run_capture_demo(out_dir, *, seed: int = 0, image_size=(480, 360), console: 
         folder = cap_root / name
         if not (folder / CAPTURE_FILE).is_file():
             console.print(f"simulating capture [bold]{name}[/] → {folder}/")
-            simulate_capture(p, folder, seed=seed + i, image_size=image_size, texture=TEXTURES.get(name, "wood"),
-                             model="anisotropic", name=name)
+            simulate_capture(
+                p,
+                folder,
+                seed=seed + i,
+                image_size=image_size,
+                texture=TEXTURES.get(name, "wood"),
+                model="anisotropic",
+                name=name,
+            )
     console.print(f"fitting: wardjax fit {cap_root} --out {out_dir / 'fits'}")
     items = run_batch([cap_root / n for n in truth], out_dir / "fits")
     table = Table(title="Table 1 materials: true vs fitted ± 1σ (joint anisotropic fit, Ward 1992 normalisation)")
@@ -90,21 +98,39 @@ def run_capture_demo(out_dir, *, seed: int = 0, image_size=(480, 360), console: 
         t = truth[it.name]
         rd_true = _true_mean_rho_d(cap_root / it.name, out_dir / "fits" / it.name)
         rd_true = float(np.mean(t.rho_d)) if rd_true is None else rd_true
-        table.add_row(it.name, "true", f"{rd_true:.4f}", f"{float(t.rho_s):.4f}",
-                      f"{float(t.alpha_x):.4f}", f"{float(t.alpha_y):.4f}", "")
-        if it.status != "ok":
+        table.add_row(
+            it.name,
+            "true",
+            f"{rd_true:.4f}",
+            f"{float(t.rho_s):.4f}",
+            f"{float(t.alpha_x):.4f}",
+            f"{float(t.alpha_y):.4f}",
+            "",
+        )
+        doc = it.params  # the params.json document; an "ok" item always carries one
+        if it.status != "ok" or doc is None:
             table.add_row("", "[red]error[/]", it.error, "", "", "", "", end_section=True)
             continue
-        p, e = it.params["params"], it.params["stderr"]
-        table.add_row("", "fitted", _pm(float(np.mean(p["rho_d"])), float(np.mean(e["rho_d"]))),
-                      _pm(p["rho_s"], e["rho_s"]), _pm(p["alpha_x"], e["alpha_x"]), _pm(p["alpha_y"], e["alpha_y"]),
-                      it.params["fit"]["status"], end_section=True)
-        results[it.name] = it.params
+        p, e = doc["params"], doc["stderr"]
+        table.add_row(
+            "",
+            "fitted",
+            _pm(float(np.mean(p["rho_d"])), float(np.mean(e["rho_d"]))),
+            _pm(p["rho_s"], e["rho_s"]),
+            _pm(p["alpha_x"], e["alpha_x"]),
+            _pm(p["alpha_y"], e["alpha_y"]),
+            doc["fit"]["status"],
+            end_section=True,
+        )
+        results[it.name] = doc
     console.print(table)
-    console.print(f"Results in [bold]{out_dir / 'fits'}/[/] (per capture: params.json, rho_d.tif/.png, "
-                  "scanline.png, material.rad; summary.csv).")
-    write_json_atomic(out_dir / "demo.json", {k: {"params": v["params"], "stderr": v["stderr"]}
-                                              for k, v in results.items()})
+    console.print(
+        f"Results in [bold]{out_dir / 'fits'}/[/] (per capture: params.json, rho_d.tif/.png, "
+        "scanline.png, material.rad; summary.csv)."
+    )
+    write_json_atomic(
+        out_dir / "demo.json", {k: {"params": v["params"], "stderr": v["stderr"]} for k, v in results.items()}
+    )
     if "marble" in results:
         _demo_texture(out_dir / "fits" / "marble", console)
     return results
@@ -112,12 +138,15 @@ def run_capture_demo(out_dir, *, seed: int = 0, image_size=(480, 360), console: 
 
 def _demo_texture(fit_dir: Path, console: Console, size: int = 512) -> Path:
     """Synthesise a ``size``² tile from the capture's ``texture.json``; write ``texture_synth.png`` (sRGB view)."""
-    from ..texture import TextureModel, synthesize_texture, write_texture_image
 
     model = TextureModel.load(fit_dir / "texture.json")
     res = synthesize_texture(model, (size, size), seed=0)
     out = write_texture_image(fit_dir / "texture_synth.png", res.image)
-    console.print(f"texture: wardjax texture synthesize {fit_dir / 'texture.json'} --size {size}x{size} -o {out} "
-                  f"(subband KS {res.initial_distance:.3f} → {res.distance[-1]:.3f} over {res.distance.size} "
-                  "iterations; it tiles seamlessly)", highlight=False, soft_wrap=True)
+    console.print(
+        f"texture: wardjax texture synthesize {fit_dir / 'texture.json'} --size {size}x{size} -o {out} "
+        f"(subband KS {res.initial_distance:.3f} → {res.distance[-1]:.3f} over {res.distance.size} "
+        "iterations; it tiles seamlessly)",
+        highlight=False,
+        soft_wrap=True,
+    )
     return out

@@ -28,10 +28,9 @@ from ..fit import CombinedFit, ScanlineFit, fit_scanlines, texture_field_covaria
 from ..fit._texture_field import lobe
 from ..reconstruct import MIN_SCANLINE_SAMPLES, MaskReason, bin_scanlines, reconstruct_capture
 from ..texture import extract_rho_d
-from ..ward import WardParams
+from ..ward import Normalization, WardParams
 
 __all__ = ["CaptureFit", "fit_capture"]
-
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -137,12 +136,9 @@ def fit_capture(cap: Capture, *, max_fit_samples: int = 50_000, band_rows: int =
         below the noise floor or without a mirror point on the standard), or
         no scanline carries a specular signal.
     """
-    if cap.method != "scanline":  # the smartphone method dispatches in wardjax.batch
+    if cap.method != "scanline":  # the smartphone method dispatches in wardjax.run
         raise CaptureError(CAPTURE_FILE, "method", f"fit_capture fits method = 'scanline', got {cap.method!r}")
     cfg = cap.config
-    rig = cap.rig
-    cam = rig.camera
-    h, w = cam.height, cam.width
     norm = cfg.fit.normalization
     tangent = cap.tangent
     lit_name = cfg.images.lit
@@ -152,26 +148,27 @@ def fit_capture(cap: Capture, *, max_fit_samples: int = 50_000, band_rows: int =
 
     n_probe = int(probe.sum())
     if n_probe == 0:
-        raise CaptureError(CAPTURE_FILE, "camera", "no pixel of the image sees the probe; check rig.camera, "
-                           "camera.look_at and regions.probe")
-    valid = probe & np.all(np.isfinite(f_r), axis=-1)
-    n_valid = int(valid.sum())
-    counts = {r.name.lower(): int(np.sum(probe & ((flags & r) != 0))) for r in MaskReason}
+        raise CaptureError(
+            CAPTURE_FILE,
+            "camera",
+            "no pixel of the image sees the probe; check rig.camera, camera.look_at and regions.probe",
+        )
+    n_valid = int((probe & np.all(np.isfinite(f_r), axis=-1)).sum())
+    counts = {name.lower(): int(np.sum(probe & ((flags & r) != 0))) for name, r in MaskReason.__members__.items()}
     if n_valid == 0:
-        worst = max(counts, key=counts.get)
+        worst = max(counts, key=lambda reason: counts[reason])
         why = {
             "off_standard": "no probe pixel has its mirror point on the standard (check regions and the rig)",
             "saturated": "every probe pixel or its mirror point is saturated; reduce the exposure",
             "below_noise": f"the lamp signal (lit − dark) is below the noise floor ({cfg.fit.noise_floor}) "
-                           "everywhere on the probe or the standard; check the exposure and the lamp",
+            "everywhere on the probe or the standard; check the exposure and the lamp",
             "nonfinite": "the pixel values are not finite",
         }[worst]
         raise CaptureError(lit_name, None, f"no usable probe pixel: {why}")
 
     # ---------------------------------------------------------------- fit data
     bins = bin_scanlines(rec, max_fit_samples)
-    b, (rows_p, cols_p) = bins.b, bins.box
-    r0, r1, c0, c1 = rows_p.start, rows_p.stop, cols_p.start, cols_p.stop
+    b = bins.b
     F, WI, WO = bins.f_r, bins.wi, bins.wo  # (S, N, 3), scanlines = image columns
     X, Y = bins.points[..., 0], bins.points[..., 1]
     n_per = np.sum(np.all(np.isfinite(F), axis=-1), axis=1)
@@ -185,8 +182,11 @@ def fit_capture(cap: Capture, *, max_fit_samples: int = 50_000, band_rows: int =
     joint = _joint_input(res)
     comb = joint.combined(cfg.fit.model)
     if not np.isfinite(comb.params.rho_s) or comb.status == Status.INSUFFICIENT_DATA:
-        raise CaptureError(lit_name, None, "no scanline carries a specular signal the Ward model can fit "
-                           f"(joint fit: {comb.status.name.lower()})")
+        raise CaptureError(
+            lit_name,
+            None,
+            f"no scanline carries a specular signal the Ward model can fit (joint fit: {comb.status.name.lower()})",
+        )
     # Honest errors: the ρd texture aliases into (ρs, α) in a way no residual-based error sees.
     cols_fit = np.flatnonzero(keep)
     tex_err = texture_field_covariance(F, WI, WO, cols_fit, comb.params, cfg.fit.model, norm)
@@ -197,35 +197,82 @@ def fit_capture(cap: Capture, *, max_fit_samples: int = 50_000, band_rows: int =
         # The same data refitted in Radiance's normalisation, started from this fit:
         # same shapes, so the compiled joint solver is reused.
         rad = dataclasses.replace(joint, normalization=RADIANCE_NORMALIZATION).combined(cfg.fit.model)
-        rad = with_texture_errors(rad, texture_field_covariance(F, WI, WO, cols_fit, rad.params, cfg.fit.model,
-                                                                 RADIANCE_NORMALIZATION))
+        rad = with_texture_errors(
+            rad, texture_field_covariance(F, WI, WO, cols_fit, rad.params, cfg.fit.model, RADIANCE_NORMALIZATION)
+        )
 
-    # ---------------------------------------------------------------- texture
-    # Bands padded to one bucketed shape (NaN values, sliced off): one compilation for the whole image,
-    # shared by captures of one rig.
+    rho_d = _texture(f_r, wi, wo, probe, comb.params, norm, bins.box, band_rows)
+    model_f, spec = _model_values(comb, WI, WO, norm)
+    diagnostics = _diagnostics(rec, counts, rho_d, b, F, model_f, n_per, x_scan, res, comb, tex_err)
+    profile = _profile(F, Y, model_f, spec, n_per, x_scan)
+    return CaptureFit(
+        name=cap.name,
+        method=cap.method,
+        model=cfg.fit.model,
+        normalization=norm,
+        params=comb.params,
+        stderr=comb.stderr,
+        combined=comb,
+        scanlines=res,
+        scanline_x=x_scan,
+        radiance=rad,
+        rho_d=rho_d,
+        flags=flags,
+        probe=probe,
+        diagnostics=diagnostics,
+        profile=profile,
+        tangent=tangent,
+        checksums=dict(cap.checksums),
+    )
+
+
+def _texture(f_r, wi, wo, probe, params: WardParams, norm: Normalization, box, band_rows: int) -> np.ndarray:
+    """The per-pixel ρd over the probe's bounding box, band by band (NaN off the probe).
+
+    Bands are padded to one bucketed shape (NaN values, sliced off): one
+    compilation for the whole image, shared by captures of one rig.
+    """
+    h, w = probe.shape
+    (rows_p, cols_p) = box
+    r0, r1, c0, c1 = rows_p.start, rows_p.stop, cols_p.start, cols_p.stop
     rho_d = np.full((h, w, 3), np.nan, np.float32)
     hb = min(band_rows, r1 - r0)
     band = (_shapes.bucket(hb), _shapes.bucket(c1 - c0))
     for s0 in range(r0, r1, hb):
         s1 = min(s0 + hb, r1)
         sl = (slice(s0, s1), slice(c0, c1))
-        fb, wib, wob = (_shapes.pad_to_shape(a, band, fill) for a, fill in ((f_r[sl], np.nan), (wi[sl], 0.0),
-                                                                            (wo[sl], 0.0)))
-        out = extract_rho_d(fb, wib, wob, comb.params, normalization=norm)[: s1 - s0, : c1 - c0]
+        fb, wib, wob = (
+            _shapes.pad_to_shape(a, band, fill) for a, fill in ((f_r[sl], np.nan), (wi[sl], 0.0), (wo[sl], 0.0))
+        )
+        out = extract_rho_d(fb, wib, wob, params, normalization=norm)[: s1 - s0, : c1 - c0]
         rho_d[sl] = np.where(probe[sl][..., None], out, np.nan)
+    return rho_d
 
-    # ---------------------------------------------------------------- diagnostics
-    spec = float(comb.params.rho_s) * lobe(WI, WO, [float(comb.params.alpha_x), float(comb.params.alpha_y)], norm)[0]
-    rd_s = comb.rho_d_scanlines
-    model_f = rd_s[:, None, :] / np.pi + spec[..., None]
+
+def _model_values(comb: CombinedFit, WI, WO, norm: str) -> tuple[np.ndarray, np.ndarray]:
+    """The joint fit's model ``(S, N, 3)`` on the binned scanlines, and its specular part ``(S, N)``."""
+    p = comb.params
+    spec = float(p.rho_s) * lobe(WI, WO, [float(p.alpha_x), float(p.alpha_y)], norm)[0]
+    return comb.rho_d_scanlines[:, None, :] / np.pi + spec[..., None], spec
+
+
+def _diagnostics(
+    rec, counts, rho_d, b, F, model_f, n_per, x_scan, res: ScanlineFit, comb: CombinedFit, tex_err
+) -> dict:
+    """Pixel counts by mask reason, scanline status counts, error models side by side, residuals, texture."""
+    if comb.covariance_robust is None or comb.covariance_model is None:  # only a fit without data lacks them
+        raise ValueError("the joint fit carries no covariances to report")
+    h, w = rec.probe.shape
+    probe = rec.probe
     resid = F - model_f
     ok = np.isfinite(resid)
     rms = float(np.sqrt(np.mean(resid[ok] ** 2)))
     mean_f = float(np.mean(F[ok]))
     tex_ok = np.all(np.isfinite(rho_d), axis=-1)
     names, cnt = np.unique(res.status_names, return_counts=True)
-    diagnostics = {
-        "pixels": {"image": h * w, "probe": n_probe, "valid": n_valid, **counts},
+    n_valid = int((probe & np.all(np.isfinite(rec.f_r), axis=-1)).sum())
+    return {
+        "pixels": {"image": h * w, "probe": int(probe.sum()), "valid": n_valid, **counts},
         "binning": b,
         "errors": {  # 1-σ of (ρs, α…) by each error model; stderr reports "texture_field"
             "reported": comb.errors,
@@ -242,8 +289,11 @@ def fit_capture(cap: Capture, *, max_fit_samples: int = 50_000, band_rows: int =
             "rho_s_median": float(np.nanmedian(res.params.rho_s)),
             "x_range_mm": [float(np.min(x_scan)), float(np.max(x_scan))],
         },
-        "residuals": {"rms": rms, "relative_rms": rms / mean_f if mean_f > 0 else float("nan"),
-                      "max_abs": float(np.max(np.abs(resid[ok])))},
+        "residuals": {
+            "rms": rms,
+            "relative_rms": rms / mean_f if mean_f > 0 else float("nan"),
+            "max_abs": float(np.max(np.abs(resid[ok]))),
+        },
         "texture": {
             "valid_fraction": float(tex_ok[probe].mean()),
             "mean": [float(c) for c in np.mean(rho_d[tex_ok], axis=0)] if tex_ok.any() else [float("nan")] * 3,
@@ -251,21 +301,20 @@ def fit_capture(cap: Capture, *, max_fit_samples: int = 50_000, band_rows: int =
         },
     }
 
-    # The plotted scanline: near the stripline ("nearby the centerline", section 4.1)
-    # among those with at least 80 % of the best sample count.
+
+def _profile(F, Y, model_f, spec, n_per, x_scan) -> dict:
+    """The scanline plotted in ``scanline.png``.
+
+    Near the stripline ("nearby the centerline", section 4.1) among those with
+    at least 80 % of the best sample count.
+    """
     full = np.flatnonzero(n_per >= 0.8 * n_per.max())
     s = int(full[np.argmin(x_scan[full])])
     good = np.all(np.isfinite(F[s]), axis=-1)
-    profile = {
+    return {
         "x": float(x_scan[s]),
         "y": Y[s][good],
         "f_r": F[s][good],
         "model": model_f[s][good],
         "rho_d": np.pi * (F[s][good] - spec[s][good][:, None]),
     }
-    return CaptureFit(
-        name=cap.name, method=cap.method, model=cfg.fit.model, normalization=norm,
-        params=comb.params, stderr=comb.stderr, combined=comb, scanlines=res, scanline_x=x_scan, radiance=rad,
-        rho_d=rho_d, flags=flags, probe=probe, diagnostics=diagnostics, profile=profile, tangent=tangent,
-        checksums=dict(cap.checksums),
-    )

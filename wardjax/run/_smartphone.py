@@ -25,16 +25,30 @@ def fit_smartphone_capture(cap: SmartphoneCapture, out_dir: Path, *, created: st
     t = cfg.thresholds
     try:
         params, stderr, post = fit_smartphone(
-            cap.photo, tuple(cfg.photo.region), ppb=t.ppb, ppb_mean=t.ppb_mean, n_observers=t.n_observers,
-            display=cfg.setup.display, viewing=cfg.setup.viewing, decoding=cfg.photo.decoding,
-            n=cfg.specular.n, n_range=tuple(cfg.specular.n_range), seed=cfg.fit.seed,
+            cap.photo,
+            tuple(cfg.photo.region),
+            ppb=t.ppb,
+            ppb_mean=t.ppb_mean,
+            n_observers=t.n_observers,
+            display=cfg.setup.display,
+            viewing=cfg.setup.viewing,
+            decoding=cfg.photo.decoding,
+            n=cfg.specular.n,
+            n_range=cfg.specular.n_range,  # validated into a (lo, hi) tuple
+            seed=cfg.fit.seed,
         )
     except ValueError as e:  # thresholds out of the display's range, a region of one colour…
         raise CaptureError(CAPTURE_FILE, "thresholds", str(e).splitlines()[0]) from None
-    err = WardParams(rho_d=np.asarray(stderr["rho_d"]), rho_s=stderr["rho_s"],
-                     alpha_x=stderr["alpha_x"], alpha_y=stderr["alpha_y"])
+    err = WardParams(
+        rho_d=np.asarray(stderr["rho_d"]), rho_s=stderr["rho_s"], alpha_x=stderr["alpha_x"], alpha_y=stderr["alpha_y"]
+    )
     return write_smartphone_outputs(
-        out_dir, name=cap.name, params=params, stderr=err, posterior=post,
+        out_dir,
+        name=cap.name,
+        params=params,
+        stderr=err,
+        posterior=post,
         rho_s_source=f"Fresnel, n = {cfg.specular.n} (range {list(cfg.specular.n_range)})",
-        inputs=cap.checksums, created=created,
+        inputs=cap.checksums,
+        created=created,
     )

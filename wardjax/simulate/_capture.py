@@ -31,7 +31,6 @@ from ._procedural import plane_texture
 __all__ = ["SensorNoise", "default_rig", "framed_camera", "simulate_capture", "write_capture_toml"]
 
 
-
 @dataclasses.dataclass(frozen=True)
 class SensorNoise:
     """Gaussian sensor noise in linear units of full scale: ``σ² = read² + shot · v``.
@@ -57,8 +56,12 @@ def default_rig(image_size=(320, 240)) -> Rig:
     position = (0.0, -300.0, 400.0)
     probe = (3.0, 120.0, -150.0, 150.0)
     standard = (-120.0, -3.0, -150.0, 150.0)
-    return Rig(lamp=lamp, camera=framed_camera(position, (0.0, 0.0, 0.0), image_size, [probe, standard]),
-               probe=probe, standard=standard)
+    return Rig(
+        lamp=lamp,
+        camera=framed_camera(position, (0.0, 0.0, 0.0), image_size, [probe, standard]),
+        probe=probe,
+        standard=standard,
+    )
 
 
 def framed_camera(position, look_at, image_size, boxes, margin: float = 0.04) -> Camera:
@@ -150,38 +153,16 @@ def simulate_capture(
         The folder, loaded with :func:`wardjax.load_capture`.
     """
     out = Path(out)
-    if bit_depth not in (8, 16):
-        raise ValueError(f"bit_depth must be 8 or 16, got {bit_depth}")
-    if image_format not in ("png", "tif", "jpg"):
-        raise ValueError(f"image_format must be 'png', 'tif' or 'jpg', got {image_format!r}")
-    if image_format == "jpg" and bit_depth != 8:
-        raise ValueError("JPEG images are 8-bit")
+    _check_format(bit_depth, image_format)
     rig = rig or default_rig(image_size)
     noise = SensorNoise() if noise is None else noise
     rng = np.random.default_rng(seed)
     tex_seed = int(rng.integers(2**31))
     base = np.broadcast_to(np.asarray(params.rho_d, float), (3,))
-    if callable(texture):
-        rho_d_map = texture
-        tex_name = getattr(texture, "__name__", "callable")
-    else:
-        def rho_d_map(x, y):
-            m = plane_texture(texture, x, y, amplitude=texture_amplitude, seed=tex_seed)
-            return np.clip(base * m[..., None], 0.0, 1.0)
-        tex_name = texture
-    cam = rig.camera
-    h, w = cam.height, cam.width
-    radiance = np.empty((h, w, 3), np.float32)
-    amb = np.empty((h, w, 3), np.float32)
-    truth = np.empty((h, w, 3), np.float32)
-    lit_area = np.zeros((h, w), bool)
-    for r0 in range(0, h, band_rows):
-        rows = np.arange(r0, min(r0 + band_rows, h))
-        rad, a, t, on = capture_radiance(params, rig, rho_d_map, tangent, rho_standard, normalization, rows)
-        radiance[r0:r0 + len(rows)] = rad
-        amb[r0:r0 + len(rows)] = a
-        truth[r0:r0 + len(rows)] = t
-        lit_area[r0:r0 + len(rows)] = on
+    rho_d_map, tex_name = _rho_d_map(texture, base, texture_amplitude, tex_seed)
+    radiance, amb, truth, lit_area = _render_bands(
+        params, rig, rho_d_map, tangent, rho_standard, normalization, band_rows
+    )
     if exposure is None:
         peak = float(np.max(radiance[lit_area])) if lit_area.any() else float(np.max(radiance))
         exposure = headroom / peak
@@ -194,39 +175,130 @@ def simulate_capture(
 
     ext = {"png": ".png", "tif": ".tif", "jpg": ".jpg"}[image_format]
     out.mkdir(parents=True, exist_ok=True)
-    write_image(out / f"lit{ext}", encode_image(lit, encoding, bit_depth))
-    if dark:
-        write_image(out / f"dark{ext}", encode_image(dark_img, encoding, bit_depth))
+    for stem, img in (("lit", lit), ("dark", dark_img if dark else None)):
+        if img is not None:
+            write_image(out / f"{stem}{ext}", encode_image(img, encoding, bit_depth))
     write_image(out / "truth_rho_d.tif", truth)
 
     if model is None:
         model = "isotropic" if float(params.alpha_x) == float(params.alpha_y) else "anisotropic"
+    config = _capture_config(
+        rig, tangent, rho_standard, ext, dark, encoding, bit_depth, name, model, normalization, noise_floor
+    )
+    write_capture_toml(
+        out / CAPTURE_FILE,
+        config,
+        header="Simulated by wardjax.simulate_capture; the truth is in truth.json and truth_rho_d.tif.",
+    )
+    truth_doc = {
+        "params": _params_dict(params, base),
+        "normalization": normalization,
+        "texture": tex_name,
+        "texture_amplitude": texture_amplitude,
+        "seed": seed,
+        "exposure": exposure,
+        "ambient": ambient,
+        "noise": {"read": noise.read, "shot": noise.shot},
+        "tangent": list(map(float, tangent)),
+    }
+    write_json_atomic(out / "truth.json", truth_doc)
+    cap = load_capture(out)
+    if not isinstance(cap, Capture):  # the folder just written has method = "scanline"
+        raise RuntimeError(f"{out}: the simulated capture did not load as a scanline capture")
+    return cap
+
+
+def _render_bands(params, rig: Rig, rho_d_map, tangent, rho_standard, normalization, band_rows: int):
+    """Noise-free radiance, ambient reflectance, true ρd and the lit area, rendered ``band_rows`` rows at a time."""
+    cam = rig.camera
+    h, w = cam.height, cam.width
+    radiance = np.empty((h, w, 3), np.float32)
+    amb = np.empty((h, w, 3), np.float32)
+    truth = np.empty((h, w, 3), np.float32)
+    lit_area = np.zeros((h, w), bool)
+    for r0 in range(0, h, band_rows):
+        rows = np.arange(r0, min(r0 + band_rows, h))
+        rad, a, t, on = capture_radiance(params, rig, rho_d_map, tangent, rho_standard, normalization, rows)
+        radiance[r0 : r0 + len(rows)] = rad
+        amb[r0 : r0 + len(rows)] = a
+        truth[r0 : r0 + len(rows)] = t
+        lit_area[r0 : r0 + len(rows)] = on
+    return radiance, amb, truth, lit_area
+
+
+def _capture_config(
+    rig: Rig,
+    tangent,
+    rho_standard,
+    ext: str,
+    dark: bool,
+    encoding: str,
+    bit_depth: int,
+    name,
+    model: str,
+    normalization: str,
+    noise_floor: float,
+) -> dict:
+    """The ``capture.toml`` of a simulated capture, as a dict (``None`` values are left out when written)."""
+    cam = rig.camera
+    w, h = cam.width, cam.height
     rs = np.asarray(rho_standard, float)
     config = {
         "method": "scanline",
         "name": name,
         "rho_standard": float(rs) if rs.ndim == 0 else [float(c) for c in rs],
-        "images": {"lit": f"lit{ext}", "dark": f"dark{ext}" if dark else None, "encoding": encoding,
-                   "bit_depth": int(bit_depth)},
+        "images": {
+            "lit": f"lit{ext}",
+            "dark": f"dark{ext}" if dark else None,
+            "encoding": encoding,
+            "bit_depth": int(bit_depth),
+        },
         "rig": {"lamp": [float(c) for c in rig.lamp], "camera": [float(c) for c in cam.position]},
-        "camera": {"look_at": [float(c) for c in cam.look_at], "up": [float(c) for c in cam.up],
-                   "focal_px": cam.focal[0], "focal_px_y": cam.focal[1] if cam.focal[1] != cam.focal[0] else None,
-                   "principal_point": [float(c) for c in cam.principal], "image_size": [w, h]},
-        "regions": {"probe": None if rig.probe is None else [float(c) for c in rig.probe],
-                    "standard": None if rig.standard is None else [float(c) for c in rig.standard]},
+        "camera": {
+            "look_at": [float(c) for c in cam.look_at],
+            "up": [float(c) for c in cam.up],
+            "focal_px": cam.focal[0],
+            "focal_px_y": cam.focal[1] if cam.focal[1] != cam.focal[0] else None,
+            "principal_point": [float(c) for c in cam.principal],
+            "image_size": [w, h],
+        },
+        "regions": {
+            "probe": None if rig.probe is None else [float(c) for c in rig.probe],
+            "standard": None if rig.standard is None else [float(c) for c in rig.standard],
+        },
         "material": {"tangent": [float(c) for c in tangent]},
         "fit": {"model": model, "normalization": normalization, "noise_floor": float(noise_floor)},
     }
     if not any(v is not None for v in config["regions"].values()):
         del config["regions"]
-    write_capture_toml(out / CAPTURE_FILE, config, header="Simulated by wardjax.simulate_capture; "
-                       "the truth is in truth.json and truth_rho_d.tif.")
-    truth_doc = {
-        "params": {"rho_d": base.tolist(), "rho_s": float(params.rho_s), "alpha_x": float(params.alpha_x),
-                   "alpha_y": float(params.alpha_y)},
-        "normalization": normalization, "texture": tex_name, "texture_amplitude": texture_amplitude,
-        "seed": seed, "exposure": exposure, "ambient": ambient,
-        "noise": {"read": noise.read, "shot": noise.shot}, "tangent": list(map(float, tangent)),
+    return config
+
+
+def _rho_d_map(texture, base: np.ndarray, amplitude: float, seed: int):
+    """The ρd map ``(x, y) → (..., 3)`` (mm) of a texture name or callable, and the name written to truth.json."""
+    if callable(texture):
+        return texture, getattr(texture, "__name__", "callable")
+
+    def rho_d_map(x, y):
+        m = plane_texture(texture, x, y, amplitude=amplitude, seed=seed)
+        return np.clip(base * m[..., None], 0.0, 1.0)
+
+    return rho_d_map, texture
+
+
+def _params_dict(params: WardParams, rho_d: np.ndarray) -> dict:
+    return {
+        "rho_d": rho_d.tolist(),
+        "rho_s": float(params.rho_s),
+        "alpha_x": float(params.alpha_x),
+        "alpha_y": float(params.alpha_y),
     }
-    write_json_atomic(out / "truth.json", truth_doc)
-    return load_capture(out)
+
+
+def _check_format(bit_depth: int, image_format: str) -> None:
+    if bit_depth not in (8, 16):
+        raise ValueError(f"bit_depth must be 8 or 16, got {bit_depth}")
+    if image_format not in ("png", "tif", "jpg"):
+        raise ValueError(f"image_format must be 'png', 'tif' or 'jpg', got {image_format!r}")
+    if image_format == "jpg" and bit_depth != 8:
+        raise ValueError("JPEG images are 8-bit")

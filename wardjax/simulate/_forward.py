@@ -21,14 +21,14 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..geometry import Rig, pixel_geometry, to_material_frame
-from ..ward import Normalization, WardParams, ward_brdf
+from ..ward import WardParams, ward_brdf
 
 __all__ = ["TABLE_REFLECTANCE", "capture_radiance", "ward_values"]
 
 TABLE_REFLECTANCE = 0.05
 
 
-def ward_values(params: WardParams, wi, wo, normalization: Normalization = "ward1992") -> np.ndarray:
+def ward_values(params: WardParams, wi, wo, normalization: str = "ward1992") -> np.ndarray:
     """``f_r`` (sr⁻¹, ``(..., 3)`` float64 NumPy) of ``params`` for directions ``wi``, ``wo`` ``(..., 3)``.
 
     Evaluated under a scoped ``jax.enable_x64(True)``; the parameters' leaves
@@ -36,8 +36,9 @@ def ward_values(params: WardParams, wi, wo, normalization: Normalization = "ward
     """
     with jax.enable_x64(True):
         p = jax.tree_util.tree_map(lambda x: jnp.asarray(np.asarray(x, np.float64)), params)
-        return np.asarray(ward_brdf(p, jnp.asarray(wi, jnp.float64), jnp.asarray(wo, jnp.float64),
-                                    normalization=normalization))
+        return np.asarray(
+            ward_brdf(p, jnp.asarray(wi, jnp.float64), jnp.asarray(wo, jnp.float64), normalization=normalization)
+        )
 
 
 def capture_radiance(params: WardParams, rig: Rig, rho_d_map, tangent, rho_standard, normalization, rows) -> tuple:
@@ -49,8 +50,12 @@ def capture_radiance(params: WardParams, rig: Rig, rho_d_map, tangent, rho_stand
     rho_d = rho_d_map(np.nan_to_num(x), np.nan_to_num(y))  # (..., 3)
     wi = to_material_frame(g.wi, tangent)
     wo = to_material_frame(g.wo, tangent)
-    p = WardParams(rho_d=rho_d, rho_s=np.asarray(params.rho_s, float), alpha_x=np.asarray(params.alpha_x, float),
-                   alpha_y=np.asarray(params.alpha_y, float))
+    p = WardParams(
+        rho_d=rho_d,
+        rho_s=np.asarray(params.rho_s, float),
+        alpha_x=np.asarray(params.alpha_x, float),
+        alpha_y=np.asarray(params.alpha_y, float),
+    )
     f = ward_values(p, np.nan_to_num(wi), np.nan_to_num(wo), normalization)
     rho_std = np.broadcast_to(np.asarray(rho_standard, float), (3,))
     local = np.full(g.points.shape, TABLE_REFLECTANCE)

@@ -27,7 +27,6 @@ PLANE_TEXTURES = ("wood", "marble", "none")
 TEXTURE_KINDS = ("noise", "wood", "marble", "wood_rings", "bricks")
 
 
-
 def _fractal(
     shape: tuple[int, int],
     rng: np.random.Generator,
@@ -104,7 +103,9 @@ def procedural_texture(kind: str, shape: tuple[int, int], seed: int = 0, *, rho_
         table = rng.uniform(-0.04, 0.04, size=(int(row.max()) + 1, int(col.max()) + 1))
         tint = table[row.astype(int), col.astype(int)]
         fine = 0.015 * _fractal(canvas, rng, 0.5)
-        img = np.where(in_mortar[..., None], np.array([0.62, 0.60, 0.56]), np.array([0.45, 0.17, 0.10]) + tint[..., None])
+        img = np.where(
+            in_mortar[..., None], np.array([0.62, 0.60, 0.56]), np.array([0.45, 0.17, 0.10]) + tint[..., None]
+        )
         img = img + fine[..., None]
     # Every real ρd map has some independent variation per channel (pigment, sensor
     # noise); without it the RGB covariance is singular and PCA channels are empty.

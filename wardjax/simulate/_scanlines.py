@@ -14,7 +14,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from ..ward import Normalization, WardParams
+from ..ward import WardParams
 from ._forward import ward_values
 
 __all__ = [
@@ -46,7 +46,7 @@ class ScanlineRig(NamedTuple):
         lamp_angle_deg: float = 25.0,
         camera_distance: float = 700.0,
         camera_angle_deg: float = 25.0,
-    ) -> "ScanlineRig":
+    ) -> ScanlineRig:
         """Lamp on the +y side, camera on the −y side, angles from the normal."""
         tl, tc = np.deg2rad(lamp_angle_deg), np.deg2rad(camera_angle_deg)
         lamp = np.array([0.0, lamp_distance * np.sin(tl), lamp_distance * np.cos(tl)])
@@ -54,7 +54,7 @@ class ScanlineRig(NamedTuple):
         return cls(lamp, camera)
 
     @classmethod
-    def random(cls, n: int, rng: np.random.Generator) -> "ScanlineRig":
+    def random(cls, n: int, rng: np.random.Generator) -> ScanlineRig:
         """``n`` rigs with lamp and camera 400–900 mm away at 15–40° (the papers' range)."""
         dl, dc = rng.uniform(400, 900, n), rng.uniform(400, 900, n)
         tl, tc = np.deg2rad(rng.uniform(15, 40, n)), np.deg2rad(rng.uniform(15, 40, n))
@@ -193,7 +193,7 @@ def simulate_scanlines(
     noise_rel: float = 0.01,
     noise_abs: float = 0.0,
     shot: float = 0.0,
-    normalization: Normalization = "ward1992",
+    normalization: str = "ward1992",
     seed: int | np.random.Generator = 0,
 ) -> ScanlineData:
     """Render noisy BRDF samples along scanlines through the highlight.

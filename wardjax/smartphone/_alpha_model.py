@@ -17,7 +17,7 @@ Physical lines (paper section 6, Fig. 8a)
     and 6, whose lobe SDs it distrusts), with R² per lightness. The ratio ``b_i / d_i`` is
     the scale from lobe SD (degrees) to Ward α that the published model implies.
 
-Uncertainty carried into the posterior (see :mod:`wardjax._alpha_posterior`)
+Uncertainty carried into the posterior (see :mod:`wardjax.smartphone._alpha_posterior`)
     - calibration: the published lines are a point estimate; their uncertainty is taken
       from the physical fits, whose covariance ``s² (XᵀX)⁻¹`` (``s²`` pooled over the
       four lines, 8 degrees of freedom) is carried into α units by ``(b_i/d_i)²``;
@@ -41,6 +41,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from .._data import calibration_path
 from ..capture import Display, Viewing, load_display, load_viewing
+from ._alpha_posterior import alpha_posterior, alpha_posterior_batch
 from ._color import luminance_from_rho_d
 from ._gratings import cpd_to_ppb, ppb_to_cpd
 
@@ -148,8 +149,13 @@ def physical_lines() -> PhysicalLines:
     rel_var = float(np.sum(np.concatenate(rel_all) ** 2) / dof)
     sigma_obs = float(np.sqrt(3.0 * max(rel_var - float(np.mean(np.concatenate(q_all))), 1e-4)))
     return PhysicalLines(
-        intercept=coefs[:, 0], slope=coefs[:, 1], r2=np.array(r2s), cov=s2 * np.array(xtx_inv),
-        sd_to_alpha=b / coefs[:, 1], sigma_obs=sigma_obs, residual_dof=dof,
+        intercept=coefs[:, 0],
+        slope=coefs[:, 1],
+        r2=np.array(r2s),
+        cov=s2 * np.array(xtx_inv),
+        sd_to_alpha=b / coefs[:, 1],
+        sigma_obs=sigma_obs,
+        residual_dof=dof,
     )
 
 
@@ -194,9 +200,12 @@ class AlphaModel:
         scale = b / phys.slope
         cov = phys.cov * (scale**2)[:, None, None]
         return cls(
-            anchor_lightness=lightness_from_rho_d(t["rho_d"], grey=True), intercept=a, slope=b, cov=cov,
+            anchor_lightness=lightness_from_rho_d(t["rho_d"], grey=True),
+            intercept=a,
+            slope=b,
+            cov=cov,
             log_sigma_obs_prior=(float(np.log(phys.sigma_obs)), float(sigma_obs_prior_sd)),
-            alpha_bounds=tuple(float(v) for v in alpha_bounds),
+            alpha_bounds=(float(alpha_bounds[0]), float(alpha_bounds[1])),
         )
 
     # ------------------------------------------------------------------ point model
@@ -215,17 +224,17 @@ class AlphaModel:
         cov = np.einsum("...k,kij->...ij", w**2, self.cov)
         return mean, cov
 
-    def alpha(self, ppb: ArrayLike, rho_d: ArrayLike) -> NDArray:
+    def alpha(self, ppb: ArrayLike, rho_d: ArrayLike) -> NDArray | np.floating:
         """The published point model ``α = a(L*) + b(L*) · PPB`` (broadcasts ``ppb`` with ρd's lightness)."""
         (mean, _) = self.line(rho_d)
         return mean[..., 0] + mean[..., 1] * np.asarray(ppb, dtype=np.float64)
 
-    def ppb_for_alpha(self, alpha: ArrayLike, rho_d: ArrayLike) -> NDArray:
+    def ppb_for_alpha(self, alpha: ArrayLike, rho_d: ArrayLike) -> NDArray | np.floating:
         """Inverse of :meth:`alpha`: the (continuous) threshold PPB the model predicts."""
         (mean, _) = self.line(rho_d)
         return (np.asarray(alpha, dtype=np.float64) - mean[..., 0]) / mean[..., 1]
 
-    def to_model_ppb(self, ppb: ArrayLike, display: str | Display, viewing: str | Viewing) -> NDArray:
+    def to_model_ppb(self, ppb: ArrayLike, display: str | Display, viewing: str | Viewing) -> NDArray | np.floating:
         """PPB measured on another set-up → the PPB of the calibration set-up with the same CPD.
 
         The model is calibrated only for the paper's set-up; other set-ups are mapped by
@@ -237,14 +246,14 @@ class AlphaModel:
     # ------------------------------------------------------------------ posterior
 
     def posterior(self, ppb=None, rho_d=None, *, ppb_mean=None, n_observers=None, seed: int, **kwargs):
-        """Posterior of α from grating thresholds (emcee); see :func:`wardjax._alpha_posterior.alpha_posterior`."""
-        from ._alpha_posterior import alpha_posterior
-
-        return alpha_posterior(self, ppb=ppb, rho_d=rho_d, ppb_mean=ppb_mean, n_observers=n_observers,
-                               seed=seed, **kwargs)
+        """Posterior of α from grating thresholds (emcee); see :func:`wardjax.smartphone.alpha_posterior`."""
+        return alpha_posterior(
+            self, ppb=ppb, rho_d=rho_d, ppb_mean=ppb_mean, n_observers=n_observers, seed=seed, **kwargs
+        )
 
     def posterior_batch(self, ppb=None, rho_d=None, *, seed: int, **kwargs):
-        """Many independent posteriors in one lock-step emcee run; see :func:`wardjax._alpha_posterior.alpha_posterior_batch`."""
-        from ._alpha_posterior import alpha_posterior_batch
+        """Many independent posteriors in one lock-step emcee run.
 
+        See :func:`wardjax.smartphone.alpha_posterior_batch`.
+        """
         return alpha_posterior_batch(self, ppb=ppb, rho_d=rho_d, seed=seed, **kwargs)

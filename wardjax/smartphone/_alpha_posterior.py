@@ -8,7 +8,7 @@ Parameters, sampled as ``θ = (log t, log σ_obs, z₁, z₂)``:
 - ``σ_obs`` — observer threshold noise: observer ``j``'s latent threshold is
   ``t_j = t · exp(σ_obs ε_j)``, ``ε_j ~ N(0, 1)`` (Weber-like, multiplicative);
 - ``z`` — the calibration line at the surface's lightness, ``(a, b) = μ + L z`` with
-  ``L Lᵀ`` the calibration covariance (:mod:`wardjax._alpha_model`), ``z ~ N(0, I)``.
+  ``L Lᵀ`` the calibration covariance (:mod:`wardjax.smartphone._alpha_model`), ``z ~ N(0, I)``.
 
 ``α = a + b t`` is derived. Priors: ``log α`` uniform on ``alpha_bounds`` (carried to
 ``log t`` with the Jacobian ``b t / α``; outside the bounds, or ``b ≤ 0``, the density is
@@ -54,6 +54,8 @@ import jax.numpy as jnp
 import numpy as np
 from jax.lax import erfc
 from numpy.typing import NDArray
+
+from ._moves import block_moves
 
 __all__ = [
     "AlphaPosterior",
@@ -151,7 +153,9 @@ def log_prob_numpy(theta, k, mask, is_mean, mean_ppb, n_obs, mu, chol, hyper):
             lp = lp - 0.5 * (mean_ppb - t * np.sqrt(e_s2)) ** 2 / var - 0.5 * np.log(2 * np.pi * var)
         else:
             kk = np.asarray(k)[np.asarray(mask, bool)]
-            lo = np.where(kk <= k_min, -np.inf, (np.log(np.maximum(kk - 0.5, 1e-12))[None] - log_t[:, None]) / sigma[:, None])
+            lo = np.where(
+                kk <= k_min, -np.inf, (np.log(np.maximum(kk - 0.5, 1e-12))[None] - log_t[:, None]) / sigma[:, None]
+            )
             hi = np.where(kk >= k_max, np.inf, (np.log(kk + 0.5)[None] - log_t[:, None]) / sigma[:, None])
             flip = lo > 0
             aa, bb = np.where(flip, -hi, lo), np.where(flip, -lo, hi)
@@ -159,84 +163,6 @@ def log_prob_numpy(theta, k, mask, is_mean, mean_ppb, n_obs, mu, chol, hyper):
             lp = lp + np.sum(lb + np.log1p(-np.exp(np.minimum(la - lb, 0.0))), axis=-1)
     lp = np.where(ok, lp, -np.inf)
     return np.where(np.isnan(lp), -np.inf, lp)
-
-
-# ----------------------------------------------------------------------------- emcee move
-
-
-class _BlockMove(emcee.moves.Move):
-    """An ensemble move run independently in ``n_blocks`` blocks of walkers.
-
-    Walker rows ``[b·W, (b+1)·W)`` form block ``b``. Each block is split into two random
-    halves of ``W/2``; each half is updated against the other half of the *same* block,
-    exactly as emcee's red-blue moves do for one ensemble. The log-probability receives
-    the proposals of one half of every block, block by block, so it can tell blocks apart
-    from the row index alone; it is called directly (vectorised), without emcee's
-    per-walker conversion loop, and NaN is refused as emcee does.
-    """
-
-    def __init__(self, n_blocks: int):
-        self.n_blocks = int(n_blocks)
-
-    def _proposal(self, s, c, rng):  # (nb, h, d), (nb, h, d) -> q, log-factors (nb, h)
-        raise NotImplementedError
-
-    def propose(self, model, state):
-        n, d = state.coords.shape
-        nb = self.n_blocks
-        w = n // nb
-        h = w // 2
-        rng = model.random
-        coords = state.coords.copy()
-        log_prob = state.log_prob.copy()
-        accepted = np.zeros(n, dtype=bool)
-        perm = np.argsort(rng.rand(nb, w), axis=1) + (np.arange(nb) * w)[:, None]
-        halves = (perm[:, :h], perm[:, h:])
-        for split in (0, 1):
-            s_idx, c_idx = halves[split], halves[1 - split]
-            q, factors = self._proposal(coords[s_idx], coords[c_idx], rng)
-            new_lp = np.asarray(model.log_prob_fn(q.reshape(-1, d)), dtype=np.float64).reshape(nb, h)
-            if np.any(np.isnan(new_lp)):
-                raise ValueError("Probability function returned NaN")
-            lnpdiff = factors + new_lp - log_prob[s_idx]
-            acc = lnpdiff > np.log(rng.rand(nb, h))
-            rows = s_idx[acc]
-            coords[rows] = q[acc]
-            log_prob[rows] = new_lp[acc]
-            accepted[rows] = True
-        return emcee.State(coords, log_prob=log_prob, blobs=None, random_state=state.random_state), accepted
-
-
-class _BlockStretchMove(_BlockMove):
-    """Goodman–Weare stretch move (emcee's :class:`~emcee.moves.StretchMove`, a = 2) per block."""
-
-    def __init__(self, n_blocks: int, a: float = 2.0):
-        super().__init__(n_blocks)
-        self.a = float(a)
-
-    def _proposal(self, s, c, rng):
-        nb, h, d = s.shape
-        zz = ((self.a - 1.0) * rng.rand(nb, h) + 1.0) ** 2 / self.a
-        cp = np.take_along_axis(c, rng.randint(h, size=(nb, h))[..., None], axis=1)
-        return cp - (cp - s) * zz[..., None], (d - 1.0) * np.log(zz)
-
-
-class _BlockDEMove(_BlockMove):
-    """Differential-evolution move (emcee's :class:`~emcee.moves.DEMove`) per block.
-
-    ``q = x + γ (x_j − x_k) + ε``, ``j ≠ k`` from the complementary half,
-    ``γ = 2.38/√(2d)`` (ter Braak 2006; Nelson et al. 2013), ``ε ~ N(0, 10⁻⁵)``; symmetric.
-    """
-
-    def _proposal(self, s, c, rng):
-        nb, h, d = s.shape
-        j = rng.randint(h, size=(nb, h))
-        k = (j + 1 + rng.randint(h - 1, size=(nb, h))) % h
-        cj = np.take_along_axis(c, j[..., None], axis=1)
-        ck = np.take_along_axis(c, k[..., None], axis=1)
-        gamma = 2.38 / np.sqrt(2.0 * d)
-        q = s + gamma * (cj - ck) + 1e-5 * rng.randn(nb, h, d)
-        return q, np.zeros((nb, h))
 
 
 # ----------------------------------------------------------------------------- inputs
@@ -400,8 +326,16 @@ def _problem_arrays(model, ppb_list, mean_list, nobs_list, rho_list):
         mus[i] = mu
         chols[i] = np.linalg.cholesky(cov)
     lo, hi = model.alpha_bounds
-    hyper = np.array([model.log_sigma_obs_prior[0], model.log_sigma_obs_prior[1], np.log(lo), np.log(hi),
-                      float(model.display.ppb_min), float(model.display.ppb_max)])
+    hyper = np.array(
+        [
+            model.log_sigma_obs_prior[0],
+            model.log_sigma_obs_prior[1],
+            np.log(lo),
+            np.log(hi),
+            float(model.display.ppb_min),
+            float(model.display.ppb_max),
+        ]
+    )
     return (k, mask, is_mean, mean_ppb, n_obs, mus, chols), hyper
 
 
@@ -421,14 +355,6 @@ def _initial_walkers(data, hyper, n_walkers, rng, scale=1.0):
     return p0
 
 
-def _moves(nb: int, move: str):
-    if move == "stretch":
-        return [_BlockStretchMove(nb)]
-    if move == "de":
-        return [(_BlockDEMove(nb), 0.8), (_BlockStretchMove(nb), 0.2)]
-    raise ValueError(f"move must be 'stretch' or 'de'; got {move!r}")
-
-
 def _run(data, hyper, *, n_walkers, seed, burn, chunk, max_steps, thin, n_tau, use_numpy=False, move="de"):
     """Run the lock-step ensemble; returns the chain (steps, B, W, 4), acceptance (B,), tau (B, 4)."""
     if n_walkers < 2 * _NDIM or n_walkers % 2:
@@ -443,11 +369,11 @@ def _run(data, hyper, *, n_walkers, seed, burn, chunk, max_steps, thin, n_tau, u
                 raise ValueError("the NumPy reference log-probability handles one surface")
             host = tuple(np.asarray(x)[0] for x in data)
 
-            def log_prob(q):
-                return log_prob_numpy(q, *host, hyper)
+            def log_prob(q: np.ndarray) -> np.ndarray:
+                return log_prob_numpy(q, *host, hyper=hyper)
         else:
 
-            def log_prob(q):
+            def log_prob(q: np.ndarray) -> np.ndarray:
                 lp = _batched(np.reshape(q, (nb, -1, _NDIM)), *dev, hyp)
                 return np.asarray(lp).reshape(-1)
 
@@ -462,9 +388,7 @@ def _run(data, hyper, *, n_walkers, seed, burn, chunk, max_steps, thin, n_tau, u
             lp0 = log_prob(p0)
         if np.any(~np.isfinite(lp0)):
             raise ValueError("could not start the walkers inside the prior support; check rho_d and the thresholds")
-        sampler = emcee.EnsembleSampler(
-            nb * n_walkers, _NDIM, log_prob, moves=_moves(nb, move), vectorize=True
-        )
+        sampler = emcee.EnsembleSampler(nb * n_walkers, _NDIM, log_prob, moves=block_moves(nb, move), vectorize=True)
         sampler.random_state = np.random.RandomState(int(rng.integers(2**31))).get_state()
         state = sampler.run_mcmc(p0, burn, skip_initial_state_check=True, progress=False)
         sampler.reset()
@@ -472,9 +396,12 @@ def _run(data, hyper, *, n_walkers, seed, burn, chunk, max_steps, thin, n_tau, u
         while True:
             state = sampler.run_mcmc(state, n_new, thin_by=thin, skip_initial_state_check=True, progress=False)
             steps += n_new * thin
-            chain = sampler.get_chain().reshape(-1, nb, n_walkers, _NDIM)
-            tau = np.array([emcee.autocorr.integrated_time(chain[:, b], c=5, tol=0, quiet=True)
-                            for b in range(nb)]) * thin
+            # emcee's get_value is typed Optional for blobs; the chain is always there after run_mcmc.
+            chain = sampler.get_chain().reshape(-1, nb, n_walkers, _NDIM)  # pyright: ignore[reportOptionalMemberAccess]
+            tau = (
+                np.array([emcee.autocorr.integrated_time(chain[:, b], c=5, tol=0, quiet=True) for b in range(nb)])
+                * thin
+            )
             need = n_tau * tau.max(axis=1)
             if np.all(steps >= need) or steps >= max_steps:
                 break
@@ -542,19 +469,28 @@ def alpha_posterior(
     """
     k_min, k_max = model.display.ppb_min, model.display.ppb_max
     rho = _as_rho_d(rho_d)
-    if (ppb is None) == (ppb_mean is None):
-        raise ValueError("give either ppb=[...] (individual thresholds) or ppb_mean= with n_observers=, not both")
+    either = "give either ppb=[...] (individual thresholds) or ppb_mean= with n_observers=, not both"
     if ppb is not None:
+        if ppb_mean is not None:
+            raise ValueError(either)
         if n_observers is not None:
             raise ValueError("n_observers goes with ppb_mean=; with ppb=[...] each entry is one observer")
         if display is not None or viewing is not None:
-            raise ValueError("individual integer thresholds must be measured on the calibration set-up;"
-                             " convert them with AlphaModel.to_model_ppb and pass ppb_mean=")
+            raise ValueError(
+                "individual integer thresholds must be measured on the calibration set-up;"
+                " convert them with AlphaModel.to_model_ppb and pass ppb_mean="
+            )
         k = _as_thresholds(ppb, k_min, k_max)
         plist, mlist, nlist = [k], [None], [None]
+    elif ppb_mean is None:
+        raise ValueError(either)
     else:
-        if n_observers is None or isinstance(n_observers, bool) or not isinstance(n_observers, (int, np.integer)) \
-                or n_observers < 1:
+        if (
+            n_observers is None
+            or isinstance(n_observers, bool)
+            or not isinstance(n_observers, (int, np.integer))
+            or n_observers < 1
+        ):
             raise ValueError(f"n_observers must be a positive integer with ppb_mean; got {n_observers!r}")
         m = float(ppb_mean)
         if not np.isfinite(m) or m <= 0:
@@ -567,8 +503,18 @@ def alpha_posterior(
     if log_prob not in ("jax", "numpy"):
         raise ValueError(f"log_prob must be 'jax' or 'numpy'; got {log_prob!r}")
     data, hyper = _problem_arrays(model, plist, mlist, nlist, [rho])
-    chain, acc, tau, steps = _run(data, hyper, n_walkers=n_walkers, seed=seed, burn=burn, chunk=chunk,
-                                  max_steps=max_steps, thin=1, n_tau=n_tau, use_numpy=log_prob == "numpy")
+    chain, acc, tau, steps = _run(
+        data,
+        hyper,
+        n_walkers=n_walkers,
+        seed=seed,
+        burn=burn,
+        chunk=chunk,
+        max_steps=max_steps,
+        thin=1,
+        n_tau=n_tau,
+        use_numpy=log_prob == "numpy",
+    )
     tau_d = dict(zip(("log_ppb_median", "log_sigma_obs", "z1", "z2"), (float(v) for v in tau[0])))
     converged = bool(steps >= n_tau * tau[0].max())
     if not converged:
@@ -577,8 +523,16 @@ def alpha_posterior(
             f" (tau = {tau[0].max():.0f} steps); raise max_steps (now {max_steps})"
         )
     params = _derived(chain[:, 0], data[5][0], data[6][0])
-    return AlphaPosterior(samples=params["alpha"], params=params, tau=tau_d, acceptance=float(acc[0]),
-                          n_steps=steps, n_walkers=n_walkers, burn=burn, converged=converged)
+    return AlphaPosterior(
+        samples=params["alpha"],
+        params=params,
+        tau=tau_d,
+        acceptance=float(acc[0]),
+        n_steps=steps,
+        n_walkers=n_walkers,
+        burn=burn,
+        converged=converged,
+    )
 
 
 def alpha_posterior_batch(
@@ -617,14 +571,17 @@ def alpha_posterior_batch(
     """
     rho_all = np.asarray(rho_d, dtype=np.float64)
     k_min, k_max = model.display.ppb_min, model.display.ppb_max
-    if (ppb is None) == (ppb_mean is None):
-        raise ValueError("give either ppb (B, M) or ppb_mean (B,) with n_observers (B,), not both")
+    either = "give either ppb (B, M) or ppb_mean (B,) with n_observers (B,), not both"
     if ppb is not None:
+        if ppb_mean is not None:
+            raise ValueError(either)
         k_all = np.asarray(ppb)
         if k_all.ndim != 2:
             raise ValueError(f"ppb must be (B, M); got shape {k_all.shape}")
         plist = [_as_thresholds(row[row != 0], k_min, k_max) for row in k_all]
         mlist = nlist = [None] * len(plist)
+    elif ppb_mean is None:
+        raise ValueError(either)
     else:
         mlist = [float(m) for m in np.atleast_1d(ppb_mean)]
         nlist = [int(n) for n in np.broadcast_to(np.asarray(n_observers), (len(mlist),))]
@@ -635,8 +592,9 @@ def alpha_posterior_batch(
     if len(rlist) != len(plist):
         raise ValueError(f"rho_d has {len(rlist)} surfaces, the thresholds {len(plist)}")
     data, hyper = _problem_arrays(model, plist, mlist, nlist, rlist)
-    chain, acc, tau, steps = _run(data, hyper, n_walkers=n_walkers, seed=seed, burn=burn, chunk=chunk,
-                                  max_steps=max_steps, thin=thin, n_tau=n_tau)
+    chain, acc, tau, steps = _run(
+        data, hyper, n_walkers=n_walkers, seed=seed, burn=burn, chunk=chunk, max_steps=max_steps, thin=thin, n_tau=n_tau
+    )
     nb = len(plist)
     q = np.empty((nb, len(_LEVELS)))
     mean = np.empty(nb)
@@ -647,9 +605,15 @@ def alpha_posterior_batch(
         mean[b] = d["alpha"].mean()
         if keep_samples:
             draws.append(d)
-    return AlphaPosteriorBatch(quantiles=q, mean=mean, tau_max=tau.max(axis=1), acceptance=acc,
-                               converged=steps >= n_tau * tau.max(axis=1), n_steps=steps,
-                               params=draws if keep_samples else None)
+    return AlphaPosteriorBatch(
+        quantiles=q,
+        mean=mean,
+        tau_max=tau.max(axis=1),
+        acceptance=acc,
+        converged=steps >= n_tau * tau.max(axis=1),
+        n_steps=steps,
+        params=draws if keep_samples else None,
+    )
 
 
 def simulate_observers(model, rho_d, n_observers: int, rng: np.random.Generator) -> tuple[NDArray, dict]:

@@ -28,6 +28,7 @@ Colour differences: CIE 1976 ``ΔE*ab`` (the paper's) and CIEDE2000.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import Literal
 
 import colour
@@ -142,7 +143,7 @@ def validate_region(region, shape: tuple[int, ...], name: str = "region") -> tup
 # ----------------------------------------------------------------------------- decoding
 
 
-def decode_srgb(values: ArrayLike, decoding: Decoding = "gamma2.2") -> NDArray:
+def decode_srgb(values: ArrayLike, decoding: str = "gamma2.2") -> NDArray:
     """Encoded sRGB values → linear RGB (white D65).
 
     Parameters
@@ -181,9 +182,9 @@ def _robust_mean(pixels: NDArray) -> tuple[NDArray, NDArray, NDArray]:
 
 def diffuse_from_srgb(
     image: ArrayLike,
-    region: tuple[int, int, int, int],
+    region: Sequence[float],
     *,
-    decoding: Decoding = "gamma2.2",
+    decoding: str = "gamma2.2",
     return_stderr: bool = False,
 ):
     """Estimate RGB ρd from a white-balanced sRGB photo (smartphone paper, section 3.1).
@@ -223,7 +224,7 @@ def diffuse_from_srgb(
 # ----------------------------------------------------------------------------- colorimetry
 
 
-def luminance_from_rho_d(rho_d: ArrayLike) -> NDArray:
+def luminance_from_rho_d(rho_d: ArrayLike) -> NDArray | np.floating:
     """Luminance factor Y of ρd (sRGB primaries, white E); a scalar ρd is grey (Y = ρd).
 
     ``Y = M_E[1] · ρd`` — the middle row of the normalised primary matrix, which sums to 1.
@@ -236,7 +237,7 @@ def luminance_from_rho_d(rho_d: ArrayLike) -> NDArray:
     return r @ _npm("E")[1]
 
 
-def diffuse_to_Lab(rho_d: ArrayLike, white: Literal["D50", "E", "D65"] = "D50") -> NDArray:
+def diffuse_to_Lab(rho_d: ArrayLike, white: str = "D50") -> NDArray:
     """ρd (sRGB primaries, white E) → XYZ (white E) → Bradford to ``white`` → CIELAB under ``white``.
 
     ``white="D50"`` is the paper's section 3.2 (ColorChecker against D50 references);
@@ -248,7 +249,7 @@ def diffuse_to_Lab(rho_d: ArrayLike, white: Literal["D50", "E", "D65"] = "D50") 
     return np.asarray(colour.XYZ_to_Lab(xyz, _WHITES[white]))
 
 
-def Lab_to_diffuse(Lab: ArrayLike, white: Literal["D50", "E", "D65"] = "D50") -> NDArray:
+def Lab_to_diffuse(Lab: ArrayLike, white: str = "D50") -> NDArray:
     """Inverse of :func:`diffuse_to_Lab`: CIELAB under ``white`` → ρd (sRGB primaries, white E)."""
     xyz = np.asarray(colour.Lab_to_XYZ(np.asarray(Lab, dtype=np.float64), _WHITES[white]))
     xyz_e = xyz if white == "E" else xyz @ _bradford(white, "E").T

@@ -49,7 +49,7 @@ def _sds():
 def _XYZ_of_spectra(illuminant: str) -> NDArray:
     """XYZ (perfect white: Y = 1) of the 24 chart spectra under a CIE illuminant."""
     sds = _sds()
-    shape = sds[0].shape                       # 380–730 nm, 10 nm: align the CMFs and illuminant to it
+    shape = sds[0].shape  # 380–730 nm, 10 nm: align the CMFs and illuminant to it
     cmfs = colour.MSDS_CMFS[_CMFS].copy().align(shape)
     ill = colour.SDS_ILLUMINANTS[illuminant].copy().align(shape)
     return np.array([colour.sd_to_XYZ(sd, cmfs, ill, method="Integration") for sd in sds]) / 100.0
@@ -155,7 +155,7 @@ def colorchecker_patch_regions(
     return boxes
 
 
-def colorchecker_rho_d(image: ArrayLike, regions, *, decoding="gamma2.2") -> NDArray:
+def colorchecker_rho_d(image: ArrayLike, regions, *, decoding: str = "gamma2.2") -> NDArray:
     """ρd (sRGB primaries, white E) of each patch box, shape (len(regions), 3)."""
     return np.array([diffuse_from_srgb(image, r, decoding=decoding) for r in regions])
 

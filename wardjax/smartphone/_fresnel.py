@@ -37,6 +37,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike
+from numpy.typing import NDArray
 
 from .._data import calibration_path
 
@@ -69,10 +70,12 @@ def fresnel_reflectance(cos_theta: ArrayLike, n: ArrayLike, k: ArrayLike = 0.0) 
     Array
         F in [0, 1], the broadcast shape. jit/vmap/grad friendly (complex arithmetic in jnp).
     """
-    c, n, k = jnp.broadcast_arrays(jnp.asarray(cos_theta), jnp.asarray(n), jnp.asarray(k))
+    # One real dtype (JAX's default float) for all three, then one complex one: no implicit promotion.
+    c, n, k = jnp.broadcast_arrays(*(jnp.asarray(x, dtype=float) for x in (cos_theta, n, k)))
     c = jnp.clip(c, 0.0, 1.0)
-    eta = n + 1j * k
+    eta = jax.lax.complex(n, k)
     eta2 = eta * eta
+    c = c.astype(eta.dtype)
     s2 = 1.0 - c * c
     g = jnp.sqrt(eta2 - s2)
     rs = (c - g) / (c + g)
@@ -89,7 +92,7 @@ def _check_ior(n, k):
     return n_arr, k_arr
 
 
-def specular_from_fresnel(n: ArrayLike = 1.5, k: ArrayLike = 0.0, *, max_angle_deg: float = 60.0):
+def specular_from_fresnel(n: ArrayLike = 1.5, k: ArrayLike = 0.0, *, max_angle_deg: float = 60.0) -> float | np.ndarray:
     """ρs as the projected-solid-angle mean of Fresnel reflectance over 0–``max_angle_deg``.
 
     Parameters
@@ -112,8 +115,11 @@ def specular_from_fresnel(n: ArrayLike = 1.5, k: ArrayLike = 0.0, *, max_angle_d
     w = 0.5 * tmax * _GL_WEIGHTS * np.cos(theta) * np.sin(theta)
     with jax.enable_x64(True):
         shape = np.broadcast_shapes(n_arr.shape, k_arr.shape) + theta.shape
-        f = fresnel_reflectance(np.broadcast_to(np.cos(theta), shape), np.broadcast_to(n_arr[..., None], shape),
-                                np.broadcast_to(k_arr[..., None], shape))
+        f = fresnel_reflectance(
+            np.broadcast_to(np.cos(theta), shape),
+            np.broadcast_to(n_arr[..., None], shape),
+            np.broadcast_to(k_arr[..., None], shape),
+        )
         rho = np.asarray(f) @ w / np.sum(w)
     return float(rho) if rho.ndim == 0 else rho
 
@@ -128,7 +134,7 @@ def _metal_table() -> dict[str, np.ndarray]:
     return {m: np.array(v) for m, v in out.items()}
 
 
-def metal_ior(metal: str, wavelength_nm: ArrayLike) -> tuple[np.ndarray, np.ndarray]:
+def metal_ior(metal: str, wavelength_nm: ArrayLike) -> tuple[NDArray | np.floating, NDArray | np.floating]:
     """Tabulated ``(n, k)`` of ``metal`` (one of :data:`METALS`), linearly interpolated in wavelength."""
     table = _metal_table()
     if metal not in table:
@@ -149,7 +155,7 @@ def specular_rgb_metal(metal: str, *, max_angle_deg: float = 60.0) -> np.ndarray
     """
     wl = np.arange(360.0, 831.0, 5.0)
     n, k = metal_ior(metal, wl)
-    rho = specular_from_fresnel(n, k, max_angle_deg=max_angle_deg)
+    rho = np.asarray(specular_from_fresnel(n, k, max_angle_deg=max_angle_deg))  # (λ,): an array in, an array out
     cmfs = colour.MSDS_CMFS["CIE 1931 2 Degree Standard Observer"].copy().align(colour.SpectralShape(360, 830, 5))
     xyz_bar = cmfs.values
     xyz = (rho[:, None] * xyz_bar).sum(0) / xyz_bar[:, 1].sum()

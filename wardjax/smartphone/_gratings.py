@@ -17,11 +17,13 @@ angle ``φ`` with the screen normal, one period centred on the line of sight sub
 from __future__ import annotations
 
 import csv
+import io
 from pathlib import Path
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from .._files import write_bytes_atomic, write_image
 from ..capture import Display, Viewing, load_display, load_viewing
 
 __all__ = [
@@ -30,6 +32,7 @@ __all__ = [
     "ppb_to_cpd",
     "write_gratings",
 ]
+
 
 def _geometry(display, viewing) -> tuple[float, float]:
     d, v = load_display(display), load_viewing(viewing)
@@ -42,7 +45,9 @@ def _geometry(display, viewing) -> tuple[float, float]:
     return d.pixel_pitch_mm * np.cos(np.deg2rad(v.screen_obliquity_deg)), v.eye_to_screen_mm
 
 
-def ppb_to_cpd(ppb: ArrayLike, display: str | Display = "iphone5s", viewing: str | Viewing = "paper") -> NDArray:
+def ppb_to_cpd(
+    ppb: ArrayLike, display: str | Display = "iphone5s", viewing: str | Viewing = "paper"
+) -> NDArray | np.floating:
     """Cycles per degree at the eye of a grating with ``ppb`` pixels per bar (any shape, > 0)."""
     p = np.asarray(ppb, dtype=np.float64)
     if np.any(~(p > 0)):
@@ -52,7 +57,9 @@ def ppb_to_cpd(ppb: ArrayLike, display: str | Display = "iphone5s", viewing: str
     return 1.0 / theta_deg
 
 
-def cpd_to_ppb(cpd: ArrayLike, display: str | Display = "iphone5s", viewing: str | Viewing = "paper") -> NDArray:
+def cpd_to_ppb(
+    cpd: ArrayLike, display: str | Display = "iphone5s", viewing: str | Viewing = "paper"
+) -> NDArray | np.floating:
     """Inverse of :func:`ppb_to_cpd` (continuous PPB)."""
     c = np.asarray(cpd, dtype=np.float64)
     if np.any(~(c > 0)):
@@ -90,8 +97,6 @@ def write_gratings(
     The CSV lists each file with its PPB and the cycles per degree at the eye for
     ``viewing``. Returns the PNG paths, coarsest-bar last.
     """
-    import imageio.v3 as iio
-
     d = load_display(display)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -99,12 +104,13 @@ def write_gratings(
     rows = []
     for ppb in range(d.ppb_min, d.ppb_max + 1):
         path = out / f"grating_{ppb:03d}.png"
-        iio.imwrite(path, grating_image(ppb, d.width_px, d.height_px, orientation=orientation))
+        write_image(path, grating_image(ppb, d.width_px, d.height_px, orientation=orientation))
         paths.append(path)
         rows.append((path.name, ppb, float(ppb_to_cpd(ppb, d, viewing))))
-    with open(out / "gratings.csv", "w", newline="", encoding="utf-8") as fh:
-        w = csv.writer(fh)
-        w.writerow(["file", "ppb", "cycles_per_degree"])
-        for name, ppb, cpd in rows:
-            w.writerow([name, ppb, f"{cpd:.4f}"])
+    buf = io.StringIO()
+    w = csv.writer(buf)
+    w.writerow(["file", "ppb", "cycles_per_degree"])
+    for name, ppb, cpd in rows:
+        w.writerow([name, ppb, f"{cpd:.4f}"])
+    write_bytes_atomic(out / "gratings.csv", buf.getvalue().encode())
     return paths

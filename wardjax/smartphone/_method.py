@@ -11,6 +11,7 @@ import numpy as np
 from ..capture import load_display, load_viewing
 from ..ward import WardParams
 from ._alpha_model import AlphaModel
+from ._alpha_posterior import _as_thresholds
 from ._color import diffuse_from_srgb
 from ._fresnel import specular_from_fresnel
 
@@ -26,7 +27,7 @@ def fit_smartphone(
     n_observers=None,
     display="iphone5s",
     viewing="paper",
-    decoding="gamma2.2",
+    decoding: str = "gamma2.2",
     n: float = 1.5,
     n_range: tuple[float, float] = (1.4, 1.7),
     seed: int = 0,
@@ -68,19 +69,25 @@ def fit_smartphone(
     """
     rho_d, rho_d_se = diffuse_from_srgb(photo_rgb, region, decoding=decoding, return_stderr=True)
     rho_s = specular_from_fresnel(n)
-    lo, hi = specular_from_fresnel(np.asarray(n_range, dtype=float))
+    lo, hi = np.asarray(specular_from_fresnel(np.asarray(n_range, dtype=float)))  # an array in, an array out
     model = model or AlphaModel.from_calibration()
     disp, view = load_display(display), load_viewing(viewing)
     same_setup = disp == model.display and view == model.viewing
     if not same_setup and ppb is not None:
-        from ._alpha_posterior import _as_thresholds
-
         k = _as_thresholds(ppb, disp.ppb_min, disp.ppb_max)
         ppb_mean, n_observers, ppb = float(np.mean(model.to_model_ppb(k, disp, view))), len(k), None
     elif not same_setup:
+        if ppb_mean is None:
+            raise ValueError("give either ppb=[...] (individual thresholds) or ppb_mean= with n_observers=")
         ppb_mean = float(model.to_model_ppb(ppb_mean, disp, view))
-    post = model.posterior(ppb=ppb, rho_d=np.clip(rho_d, 0.0, 1.0), ppb_mean=ppb_mean, n_observers=n_observers,
-                           seed=seed, **posterior_kwargs)
+    post = model.posterior(
+        ppb=ppb,
+        rho_d=np.clip(rho_d, 0.0, 1.0),
+        ppb_mean=ppb_mean,
+        n_observers=n_observers,
+        seed=seed,
+        **posterior_kwargs,
+    )
     alpha = post.median
     params = WardParams(rho_d=rho_d, rho_s=rho_s, alpha_x=alpha, alpha_y=alpha)
     stderr = {

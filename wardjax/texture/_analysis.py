@@ -1,5 +1,4 @@
-"""Texture analysis: the PCA-decorrelated quantile tables of pixels and subbands of a ρd map.
-"""
+"""Texture analysis: the PCA-decorrelated quantile tables of pixels and subbands of a ρd map."""
 
 from __future__ import annotations
 
@@ -99,7 +98,7 @@ def _pca(mean: np.ndarray, cov: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _subband_shapes(shapes) -> tuple[tuple[int, int], ...]:
-    """Grid of every subband in :func:`~wardjax._pyramid.pyramid_subbands` order."""
+    """Grid of every subband in :func:`~wardjax.texture._pyramid.pyramid_subbands` order."""
     return (shapes[0], *(s for s in shapes[:-1] for _ in range(ORIENTATIONS)), shapes[-1])
 
 

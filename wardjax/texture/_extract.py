@@ -15,7 +15,6 @@ import numpy as np
 
 from ..ward import (
     NORMALIZATIONS,
-    Normalization,
     WardParams,
     _broadcast_leading,
     _rho_s_rgb,
@@ -46,7 +45,7 @@ def _extract(f_r, wi, wo, params, normalization):
     return jnp.where(ok, jnp.clip(rho, lo, hi), jnp.nan)
 
 
-def extract_rho_d(f_r, wi, wo, params: WardParams, *, normalization: Normalization = "ward1992") -> np.ndarray:
+def extract_rho_d(f_r, wi, wo, params: WardParams, *, normalization: str = "ward1992") -> np.ndarray:
     """Per-pixel diffuse reflectance ``ρd = π (f_r − specular)``, eq. "ρd,texture".
 
     Parameters

@@ -1,5 +1,4 @@
-"""Histogram matching and quantile tables (Heeger & Bergen 1995, the CDF match of section 4.2).
-"""
+"""Histogram matching and quantile tables (Heeger & Bergen 1995, the CDF match of section 4.2)."""
 
 from __future__ import annotations
 
@@ -68,7 +67,7 @@ def _ks_picks(n: int) -> np.ndarray:
     return np.arange(0, n, _ks_stride(n), dtype=np.intp)
 
 
-def _ks_sorted(sub: Float[Array, "... m"], table: Float[Array, "... q"], probs, n_all: int) -> Float[Array, "..."]:
+def _ks_sorted(sub: Float[Array, "... m"], table: Float[Array, "... q"], probs, n_all: int) -> Float[Array, ...]:
     """One-sample KS statistic against a quantile table, ``max_k |F(v_k) − ECDF|``, from every ``s``-th order statistic.
 
     ``sub`` holds the order statistics ``v_(0), v_(s), v_(2s), …`` of ``n_all``

@@ -1,5 +1,4 @@
-"""ρd maps in and out: read a linear map, write a synthesised tile.
-"""
+"""ρd maps in and out: read a linear map, write a synthesised tile."""
 
 from __future__ import annotations
 

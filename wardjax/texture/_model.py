@@ -1,5 +1,4 @@
-"""The parametric texture description and its file format (``.json`` or ``.npz``).
-"""
+"""The parametric texture description and its file format (``.json`` or ``.npz``)."""
 
 from __future__ import annotations
 
@@ -119,7 +118,7 @@ class TextureModel(eqx.Module):
         }
 
     @classmethod
-    def from_dict(cls, d: dict, *, source: str = "texture description") -> "TextureModel":
+    def from_dict(cls, d: dict, *, source: str = "texture description") -> TextureModel:
         """Validate and build a model from :meth:`to_dict`'s form; errors name ``source`` and the field."""
 
         def field(name):
@@ -168,8 +167,8 @@ class TextureModel(eqx.Module):
         names = [str(n) for n in np.asarray(field("band_names")).tolist()]
         if tuple(names) != band_names(height):
             raise ValueError(f"{source}: field 'band_names' does not match height {height}")
-        src_shape = tuple(int(v) for v in array("source_shape", (2,)))
-        region = tuple(int(v) for v in array("region", (4,)))
+        src_h, src_w = (int(v) for v in array("source_shape", (2,)))
+        y0, y1, x0, x1 = (int(v) for v in array("region", (4,)))
         return cls(
             pca_mean=array("pca_mean", (channels,)),
             pca_basis=array("pca_basis", (channels, channels)),
@@ -178,8 +177,8 @@ class TextureModel(eqx.Module):
             band_quantiles=bands,
             height=height,
             rho_s=array("rho_s", (channels,)),
-            source_shape=src_shape,
-            region=region,
+            source_shape=(src_h, src_w),
+            region=(y0, y1, x0, x1),
             region_source=str(np.asarray(field("region_source")).item()),
             version=int(version),
         )
@@ -194,13 +193,14 @@ class TextureModel(eqx.Module):
         elif suffix == ".npz":
             arrays = {k: np.asarray(v) for k, v in d.items()}
             with atomic_path(path) as tmp, open(tmp, "wb") as fh:
-                np.savez_compressed(fh, **arrays)
+                # numpy's stub lets **kwds reach allow_pickle: bool; the keys are the model's field names.
+                np.savez_compressed(fh, **arrays)  # pyright: ignore[reportArgumentType]
         else:
             raise ValueError(f"{path}: unknown texture file type {path.suffix!r}, expected .json or .npz")
         return path
 
     @classmethod
-    def load(cls, path) -> "TextureModel":
+    def load(cls, path) -> TextureModel:
         """Read a model written by :meth:`save` (``.json`` or ``.npz``), checking format, version and shapes."""
         path = Path(path)
         if not path.is_file():

@@ -19,7 +19,7 @@ grid (DFTs with ``norm="forward"``), so their amplitude does not depend on the
 image size; pyrtools' level-``l`` bands are these times ``N M / (N_l M_l)``.
 
 Everything here is private; the public names are re-exported from
-:mod:`wardjax.synthesis`.
+:mod:`wardjax.texture`.
 """
 
 from __future__ import annotations
@@ -64,9 +64,11 @@ def pyramid_shapes(shape: tuple[int, int], height: int) -> tuple[tuple[int, int]
 
     Returns ``height + 1`` shapes; the last is the low-pass residual's.
     """
-    out = [tuple(int(s) for s in shape)]
+    h, w = shape
+    out = [(int(h), int(w))]
     for _ in range(height):
-        out.append(tuple(-(-s // 2) for s in out[-1]))
+        h, w = out[-1]
+        out.append((-(-h // 2), -(-w // 2)))
     return tuple(out)
 
 
@@ -123,6 +125,16 @@ def pyramid_masks(shape: tuple[int, int], height: int) -> dict:
     return out
 
 
+def _cmul(z: Array, m: Array) -> Array:
+    """A complex spectrum times a real mask (the mask cast to the spectrum's dtype, as promotion would)."""
+    return z * m.astype(z.dtype)
+
+
+def _expi(t: Array) -> Array:
+    """``exp(i t)`` of real ``t``, complex of the matching precision (``t`` cast, then times ``i``)."""
+    return jnp.exp(1j * t.astype(jnp.complex128 if t.dtype == jnp.float64 else jnp.complex64))
+
+
 def _crop(z: Array, shape: tuple[int, int]) -> Array:
     """Keep the half-plane DFT coefficients of a smaller grid: rows ``−⌊n/2⌋ … ⌈n/2⌉−1``, columns ``0 … m//2``."""
     n, m = shape
@@ -168,15 +180,15 @@ def pyramid_subbands(spec, masks: dict, shapes: tuple[tuple[int, int], ...]) -> 
     Separate arrays spare the copies that stacking the orientations (and
     slicing them apart again for :func:`pyramid_collapse`) would cost.
     """
-    highpass = jnp.fft.irfft2(spec * masks["hi0"][None], s=shapes[0], norm="forward")
-    z = spec * masks["lo0"][None]
+    highpass = jnp.fft.irfft2(_cmul(spec, masks["hi0"][None]), s=shapes[0], norm="forward")
+    z = _cmul(spec, masks["lo0"][None])
     out = [highpass]
     for level, band in enumerate(masks["band"]):
         iz = 1j * z
         # One orientation at a time: the same transforms as one batched call, but XLA
         # keeps one band's spectrum live instead of four (a third less temporary memory).
-        out.extend(jnp.fft.irfft2(iz * m[None], s=shapes[level], norm="forward") for m in band)
-        z = _crop(z, shapes[level + 1]) * masks["lo"][level][None]
+        out.extend(jnp.fft.irfft2(_cmul(iz, m[None]), s=shapes[level], norm="forward") for m in band)
+        z = _cmul(_crop(z, shapes[level + 1]), masks["lo"][level][None])
     out.append(jnp.fft.irfft2(z, s=shapes[-1], norm="forward"))
     return tuple(out)
 
@@ -184,8 +196,8 @@ def pyramid_subbands(spec, masks: dict, shapes: tuple[tuple[int, int], ...]) -> 
 @functools.partial(jax.jit, static_argnames="shapes")
 def pyramid_reconstruct(
     highpass: Float[Array, "c h w"],
-    bands: tuple[Float[Array, "c 4 hl wl"], ...],
-    lowpass: Float[Array, "c hL wL"],
+    bands: tuple[Float[Array, "c 4 _ _"], ...],
+    lowpass: Float[Array, "c _ _"],
     masks: dict,
     shapes: tuple[tuple[int, int], ...],
 ) -> Float[Array, "c h w"]:
@@ -204,11 +216,11 @@ def pyramid_collapse(subbands, masks: dict, shapes: tuple[tuple[int, int], ...])
     z = jnp.fft.rfft2(subbands[-1], norm="forward")
     for level in range(height - 1, -1, -1):
         band_spec = sum(
-            jnp.fft.rfft2(subbands[1 + ORIENTATIONS * level + b], norm="forward") * m[None]
+            _cmul(jnp.fft.rfft2(subbands[1 + ORIENTATIONS * level + b], norm="forward"), m[None])
             for b, m in enumerate(masks["band"][level])
         )
-        z = _pad(z * masks["lo"][level][None], shapes[level]) + (-1j) * band_spec
-    spec = z * masks["lo0"][None] + jnp.fft.rfft2(subbands[0], norm="forward") * masks["hi0"][None]
+        z = _pad(_cmul(z, masks["lo"][level][None]), shapes[level]) + (-1j) * band_spec
+    spec = _cmul(z, masks["lo0"][None]) + _cmul(jnp.fft.rfft2(subbands[0], norm="forward"), masks["hi0"][None])
     return jnp.fft.irfft2(spec, s=shapes[0], norm="forward")
 
 
@@ -228,10 +240,10 @@ def periodic_spectrum(u: Float[Array, "c h w"]):
     dx = jnp.fft.fft(u[:, :, -1] - u[:, :, 0])  # (c, n)
     tq = 2.0 * jnp.pi * jnp.fft.fftfreq(n, dtype=u.dtype)
     tr = 2.0 * jnp.pi * jnp.fft.rfftfreq(m, dtype=u.dtype)
-    v_hat = (1.0 - jnp.exp(1j * tq))[None, :, None] * dy[:, None, :] + dx[:, :, None] * (1.0 - jnp.exp(1j * tr))[None, None, :]
+    v_hat = (1.0 - _expi(tq))[None, :, None] * dy[:, None, :] + dx[:, :, None] * (1.0 - _expi(tr))[None, None, :]
     den = 2.0 * jnp.cos(tq)[:, None] + 2.0 * jnp.cos(tr)[None, :] - 4.0
     den = den.at[0, 0].set(1.0)
-    s_hat = (v_hat / den[None]).at[:, 0, 0].set(0.0)
+    s_hat = (v_hat / den[None].astype(v_hat.dtype)).at[:, 0, 0].set(0.0)
     return (jnp.fft.rfft2(u) - s_hat) / (n * m)
 
 
@@ -256,7 +268,8 @@ def periodic_smooth(u: Float[Array, "c h w"]) -> tuple[Float[Array, "c h w"], Fl
     r = 2.0 * jnp.cos(2.0 * jnp.pi * jnp.fft.rfftfreq(m, dtype=u.dtype))
     den = q[:, None] + r[None, :] - 4.0
     den = den.at[0, 0].set(1.0)
-    s_hat = jnp.fft.rfft2(v) / den[None]
+    v_spec = jnp.fft.rfft2(v)
+    s_hat = v_spec / den[None].astype(v_spec.dtype)
     s_hat = s_hat.at[:, 0, 0].set(0.0)
     s = jnp.fft.irfft2(s_hat, s=(n, m))
     return u - s, s

@@ -1,5 +1,4 @@
-"""Exact rank matching: one sort of distinct 64-bit keys gives every value its target quantile.
-"""
+"""Exact rank matching: one sort of distinct 64-bit keys gives every value its target quantile."""
 
 from __future__ import annotations
 
@@ -7,7 +6,7 @@ import concurrent.futures
 import functools
 import math
 import os
-from typing import Literal
+from typing import Literal, overload
 
 import jax
 import jax.numpy as jnp
@@ -56,7 +55,10 @@ def _order_key_inverse(k: Array) -> Array:
 
 
 def _pack(x: Float[Array, "... n"]) -> Array:
-    """Sort keys for the last axis: ``order_key(x) << 32 | p``, ``p`` the position, complemented if ``x``'s sign bit is set."""
+    """Sort keys for the last axis: ``order_key(x) << 32 | p``.
+
+    ``p`` is the position, complemented if ``x``'s sign bit is set.
+    """
     pos = jax.lax.broadcasted_iota(jnp.uint32, x.shape, x.ndim - 1)
     key = _order_key(x)
     low = jnp.where(key >> 31 == 1, pos, ~pos)  # order_key clears the top bit exactly where the sign bit is set
@@ -137,8 +139,10 @@ def _rank_host(values, targets, picks, workers: int | None = None):
         with concurrent.futures.ThreadPoolExecutor(workers) as pool:
             for f in [pool.submit(_rank_row, *job) for job in jobs]:
                 f.result()
-    return (None if targets[0] is None else tuple(jax.device_put(m) for m in matched),
-            tuple(jax.device_put(p) for p in picked))
+    return (
+        None if targets[0] is None else tuple(jax.device_put(m) for m in matched),
+        tuple(jax.device_put(p) for p in picked),
+    )
 
 
 @jax.jit
@@ -158,6 +162,10 @@ def _rank_xla(values, targets, picks):
     return tuple(matched), tuple(picked)
 
 
+@overload
+def _rank_match(values, targets: None, picks, method: SortMethod = "auto") -> tuple[None, tuple[Array, ...]]: ...
+@overload
+def _rank_match(values, targets, picks, method: SortMethod = "auto") -> tuple[tuple[Array, ...], tuple[Array, ...]]: ...
 def _rank_match(values, targets, picks, method: SortMethod = "auto"):
     """Exact rank matching of every row (last axis) of every array in ``values``.
 

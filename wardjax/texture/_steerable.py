@@ -30,6 +30,7 @@ DEFAULT_HEIGHT = 4
 
 _MIN_SIDE = 8  # smallest region/output side: a pyramid of height 1 needs 8 pixels
 
+
 class SteerablePyramid(eqx.Module):
     """Subbands of a steerable pyramid (four orientations), finest level first.
 

@@ -1,10 +1,9 @@
-"""Heeger–Bergen synthesis: histogram matching of noise to a :class:`TextureModel`, in pyramid and pixel space.
-"""
+"""Heeger–Bergen synthesis: histogram matching of noise to a :class:`TextureModel`, in pyramid and pixel space."""
 
 from __future__ import annotations
 
 import functools
-from typing import Callable, Literal
+from collections.abc import Callable
 
 import equinox as eqx
 import jax
@@ -73,7 +72,10 @@ def _band_ks(picked, tables, probs, sizes):
 
 
 def _band_targets(band_q: np.ndarray, probs: np.ndarray, shapes):
-    """Sorted target values ``(C, 1, n_b)`` for every subband at this output size, and its quantile table ``(C, 1, Q)``."""
+    """Sorted target values ``(C, 1, n_b)`` for every subband at this output size.
+
+    Also its quantile table ``(C, 1, Q)``.
+    """
     groups, tables = [], []
     for b, (h, w) in enumerate(_subband_shapes(shapes)):
         t = band_q[:, b : b + 1]
@@ -131,7 +133,10 @@ def _heeger_bergen(rng, band_q, pixel_q, probs64, masks, shapes, iterations: int
 
 @jax.jit
 def _channel_moments(ds):
-    """Mean ``(C,)`` and covariance ``(C, C)`` (float64, divided by ``n``) of the channels ``ds`` (each ``(1, 1, n)``)."""
+    """Mean ``(C,)`` and covariance ``(C, C)`` (float64, divided by ``n``) of the channels ``ds``.
+
+    Each channel is ``(1, 1, n)``.
+    """
     x = jnp.concatenate([d.reshape(1, -1) for d in ds]).astype(jnp.float64)
     mu = x.mean(axis=1)
     x = x - mu[:, None]
@@ -177,7 +182,7 @@ def synthesize_texture(
     seed: int = 0,
     iterations: int = 5,
     rho_s=None,
-    sort: Literal["auto", "numpy", "xla"] = "auto",
+    sort: str = "auto",
     progress: Callable[[int, int], None] | None = None,
 ) -> SynthesisResult:
     """Synthesise a texture of any size from a :class:`TextureModel` (Heeger & Bergen 1995, paper section 4.2).
