@@ -4,7 +4,7 @@ VENV   ?= .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 
-.PHONY: install demo test test-slow lint bench clean
+.PHONY: install demo test test-slow lint docs bench clean
 
 install: $(STAMP)
 
@@ -32,8 +32,12 @@ lint: install
 	$(VENV)/bin/ruff format --check wardjax tests benchmarks
 	$(VENV)/bin/pyright
 
+# The documentation site (MkDocs + mkdocstrings), warnings as errors, into site/.
+docs: install
+	NO_MKDOCS_2_WARNING=1 $(VENV)/bin/mkdocs build --strict -d site
+
 bench: install
 	$(PY) -m benchmarks
 
 clean:
-	rm -rf $(VENV) demo-output .pytest_cache
+	rm -rf $(VENV) demo-output .pytest_cache site

@@ -14,3 +14,20 @@ from ._setup import load_display as load_display
 from ._setup import load_viewing as load_viewing
 from ._smartphone import SmartphoneCapture as SmartphoneCapture
 from ._smartphone import SmartphoneCaptureFile as SmartphoneCaptureFile
+
+__all__ = [
+    "CAPTURE_FILE",
+    "CaptureError",
+    "IMAGE_SUFFIXES",
+    "Capture",
+    "load_capture",
+    "CaptureFile",
+    "parse_capture_file",
+    "MM_PER_IN",
+    "Display",
+    "Viewing",
+    "load_display",
+    "load_viewing",
+    "SmartphoneCapture",
+    "SmartphoneCaptureFile",
+]

@@ -23,3 +23,21 @@ from ._models import threshold_data as threshold_data
 from ._report import Candidate as Candidate
 from ._report import DiscoveryReport as DiscoveryReport
 from ._report import Step as Step
+
+__all__ = [
+    "discover",
+    "Effect",
+    "Param",
+    "LIBRARY",
+    "get_effect",
+    "library",
+    "ScanlineData",
+    "ScanlineModel",
+    "ThresholdData",
+    "ThresholdModel",
+    "scanline_data",
+    "threshold_data",
+    "Candidate",
+    "DiscoveryReport",
+    "Step",
+]

@@ -14,3 +14,20 @@ from ._radiance import RADIANCE_PRIMARIES as RADIANCE_PRIMARIES
 from ._radiance import radiance_material as radiance_material
 from ._radiance import radiance_metal as radiance_metal
 from ._radiance import radiance_rgb as radiance_rgb
+
+__all__ = [
+    "OUTPUT_FILES",
+    "scanline_figure_png",
+    "write_capture_outputs",
+    "write_smartphone_outputs",
+    "PARAMS_SCHEMA",
+    "capture_fit_document",
+    "params_document",
+    "smartphone_document",
+    "software_version",
+    "RADIANCE_NORMALIZATION",
+    "RADIANCE_PRIMARIES",
+    "radiance_material",
+    "radiance_metal",
+    "radiance_rgb",
+]

@@ -6,3 +6,12 @@ from ._scanline import fit_scanlines as fit_scanlines
 from ._texture_field import TextureErrors as TextureErrors
 from ._texture_field import texture_field_covariance as texture_field_covariance
 from ._texture_field import with_texture_errors as with_texture_errors
+
+__all__ = [
+    "CombinedFit",
+    "ScanlineFit",
+    "fit_scanlines",
+    "TextureErrors",
+    "texture_field_covariance",
+    "with_texture_errors",
+]

@@ -8,3 +8,14 @@ from ._bins import bin_scanlines as bin_scanlines
 from ._reference import MaskReason as MaskReason
 from ._reference import reconstruct_brdf as reconstruct_brdf
 from ._reference import sample_bilinear as sample_bilinear
+
+__all__ = [
+    "Reconstruction",
+    "reconstruct_capture",
+    "MIN_SCANLINE_SAMPLES",
+    "ScanlineBins",
+    "bin_scanlines",
+    "MaskReason",
+    "reconstruct_brdf",
+    "sample_bilinear",
+]

@@ -18,3 +18,24 @@ from ._scanlines import ScanlineData as ScanlineData
 from ._scanlines import ScanlineRig as ScanlineRig
 from ._scanlines import simulate_scanlines as simulate_scanlines
 from ._scanlines import x_offset_for_slope as x_offset_for_slope
+
+__all__ = [
+    "default_rig",
+    "framed_camera",
+    "SensorNoise",
+    "simulate_capture",
+    "write_capture_toml",
+    "capture_radiance",
+    "TABLE_REFLECTANCE",
+    "ward_values",
+    "plane_texture",
+    "PLANE_TEXTURES",
+    "procedural_texture",
+    "TEXTURE_KINDS",
+    "scanline_directions",
+    "scanline_positions",
+    "ScanlineData",
+    "ScanlineRig",
+    "simulate_scanlines",
+    "x_offset_for_slope",
+]

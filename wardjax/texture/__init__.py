@@ -15,3 +15,21 @@ from ._steerable import periodic_smooth_decomposition as periodic_smooth_decompo
 from ._steerable import reconstruct_steerable_pyramid as reconstruct_steerable_pyramid
 from ._synthesis import SynthesisResult as SynthesisResult
 from ._synthesis import synthesize_texture as synthesize_texture
+
+__all__ = [
+    "analyze_texture",
+    "largest_valid_rectangle",
+    "extract_rho_d",
+    "match_histogram",
+    "quantile_probabilities",
+    "read_rho_d",
+    "write_texture_image",
+    "TEXTURE_FORMAT_VERSION",
+    "TextureModel",
+    "SteerablePyramid",
+    "build_steerable_pyramid",
+    "periodic_smooth_decomposition",
+    "reconstruct_steerable_pyramid",
+    "SynthesisResult",
+    "synthesize_texture",
+]
