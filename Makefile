@@ -4,7 +4,7 @@ VENV   ?= .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 
-.PHONY: install demo test test-slow lint docs bench clean
+.PHONY: install demo test test-slow lint docs notebooks bench clean
 
 install: $(STAMP)
 
@@ -35,6 +35,10 @@ lint: install
 # The documentation site (MkDocs + mkdocstrings), warnings as errors, into site/.
 docs: install
 	NO_MKDOCS_2_WARNING=1 $(VENV)/bin/mkdocs build --strict -d site
+
+# Re-execute the notebooks in place, so that they are stored with their outputs.
+notebooks: install
+	$(PY) -m jupyter nbconvert --to notebook --execute --inplace notebooks/*.ipynb
 
 bench: install
 	$(PY) -m benchmarks

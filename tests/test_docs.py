@@ -86,3 +86,16 @@ def test_method_pages_and_notebooks_are_in_the_site(site):
         assert (site / page / "index.html").is_file(), page
     for nb in ("alpha_uncertainty", "missing_effects"):
         assert (site / "notebooks" / nb / "index.html").is_file(), nb
+
+
+def test_notebooks_are_stored_executed():
+    # The notebooks are read on the site and on GitHub as they are stored: with their outputs
+    # (make notebooks re-executes them in place); the tests execute them again.
+    import nbformat
+
+    for path in sorted((ROOT / "notebooks").glob("*.ipynb")):
+        nb = nbformat.read(path, as_version=4)
+        code = [c for c in nb.cells if c.cell_type == "code"]
+        assert code and all(c.get("execution_count") for c in code), f"{path.name}: a code cell was not executed"
+        assert not [o for c in code for o in c.get("outputs", []) if o.output_type == "error"], path.name
+        assert any("image/png" in o.get("data", {}) for c in code for o in c.get("outputs", [])), path.name
