@@ -73,6 +73,7 @@ def test_stage_packages_list_their_reexports_in_all():
         "wardjax.export",
         "wardjax.simulate",
         "wardjax.effects",
+        "wardjax.report",
         "wardjax.run",
     ):
         mod = importlib.import_module(pkg)

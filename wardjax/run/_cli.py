@@ -443,7 +443,28 @@ def diagnose_cmd(capture: Path, out_dir: Path, max_steps: int, max_samples: int)
     console.print(f"{cap.name}: {rep.verdict()}; gap {gaps}; report in {out_dir}/", highlight=False)
 
 
-# --------------------------------------------------------------------------- end diagnose
+# --------------------------------------------------------------------------- report
+
+
+@main.command("report")
+@click.argument("fits_dir", metavar="FITS_DIR", type=click.Path(path_type=Path))
+@click.option(
+    "-o",
+    "--out",
+    "out_path",
+    type=click.Path(dir_okay=False, path_type=Path),
+    required=True,
+    help="report.html (one self-contained file) or report.ipynb (the executed notebook).",
+)
+def report_cmd(fits_dir: Path, out_path: Path) -> None:
+    """Write a batch report of the fits in FITS_DIR (the --out folder of wardjax fit): an executed notebook."""
+    from ..report import write_report
+
+    try:
+        write_report(fits_dir, out_path)
+    except (ValueError, OSError) as exc:
+        _fail(str(exc).splitlines()[0])
+    console.print(f"wrote {out_path}", highlight=False)
 
 
 if __name__ == "__main__":  # pragma: no cover

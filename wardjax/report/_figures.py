@@ -1,0 +1,128 @@
+"""The figures of a batch report: errors by model, the ρd texture and a synthesised tile, the batch."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+from matplotlib.figure import Figure
+
+from ..texture import TextureModel, read_rho_d, synthesize_texture
+from ._collect import PARAMETERS, CaptureResult
+
+__all__ = ["batch_figure", "errors_figure", "gap_figure", "texture_figure"]
+
+_LABELS = {"rho_d": r"$\rho_d$ (mean RGB)", "rho_s": r"$\rho_s$", "alpha_x": r"$\alpha_x$", "alpha_y": r"$\alpha_y$"}
+_MODELS = (
+    ("texture_field", "texture field (reported)"),
+    ("scanline_sandwich", "scanline sandwich"),
+    ("model", "Gauss–Newton model"),
+)
+
+
+def errors_figure(result: CaptureResult) -> Figure | None:
+    """1-σ of the shared parameters by each error model (scanline captures); the α posterior (smartphone)."""
+    fit = result.doc["fit"]
+    fig = Figure(figsize=(6.4, 3.0), dpi=100)
+    ax = fig.add_subplot(1, 1, 1)
+    if "posterior" in fit:
+        post = fit["posterior"]
+        lo95, hi95 = post["alpha_interval_95"]
+        lo68, hi68 = post["alpha_interval_68"]
+        ax.plot([lo95, hi95], [0, 0], color="C0", lw=2, label="95 % interval")
+        ax.plot([lo68, hi68], [0, 0], color="C0", lw=6, label="68 % interval")
+        ax.plot([post["alpha_median"]], [0], "o", color="C3", label="median")
+        ax.set_yticks([])
+        ax.set_xlabel(r"$\alpha$ (posterior)")
+        ax.legend(fontsize=8, loc="upper right", frameon=False)
+        ax.set_title(f"{result.name}: α posterior", fontsize=9)
+        fig.tight_layout()
+        return fig
+    errors = fit.get("diagnostics", {}).get("errors")
+    if not errors:
+        return None
+    names = fit["covariance"]["parameters"]
+    x = np.arange(len(names))
+    width = 0.8 / len(_MODELS)
+    for k, (key, label) in enumerate(_MODELS):
+        ax.bar(x + (k - 1) * width, errors[key], width, label=label, color=f"C{k}")
+    ax.set_xticks(x, [r"$\alpha$" if n == "alpha" else _LABELS.get(n, str(n)) for n in names])
+    ax.set_yscale("log")
+    ax.set_ylabel("1-σ")
+    ax.set_title(f"{result.name}: errors of the shared parameters by error model", fontsize=9)
+    ax.legend(fontsize=7.5, frameon=False, loc="upper left", bbox_to_anchor=(1.0, 1.0))
+    fig.tight_layout()
+    return fig
+
+
+def texture_figure(result: CaptureResult, tile: int = 128, seed: int = 0) -> Figure | None:
+    """The measured ρd (mean over RGB, with its colour scale) and a tile synthesised from ``texture.json``."""
+    tif, model = result.folder / "rho_d.tif", result.folder / "texture.json"
+    if not tif.is_file():
+        return None
+    rho = read_rho_d(tif)
+    grey = np.mean(rho, axis=-1) if rho.ndim == 3 else rho  # NaN where any channel is (off the probe)
+    rows, cols = np.flatnonzero(np.isfinite(grey).any(axis=1)), np.flatnonzero(np.isfinite(grey).any(axis=0))
+    if rows.size:  # crop to the probe
+        grey = grey[rows[0] : rows[-1] + 1, cols[0] : cols[-1] + 1]
+    panels = 2 if model.is_file() else 1
+    fig = Figure(figsize=(3.4 * panels + 0.6, 3.1), dpi=100)
+    ax = fig.add_subplot(1, panels, 1)
+    finite = grey[np.isfinite(grey)]
+    lo, hi = np.percentile(finite, [1, 99]) if finite.size else (0.0, 1.0)
+    im = ax.imshow(np.ma.masked_invalid(grey), cmap="gray", vmin=lo, vmax=hi)
+    fig.colorbar(im, ax=ax, label=r"$\rho_d$ (mean RGB)", fraction=0.046)
+    ax.set_title("measured ρd over the probe (white: unusable)", fontsize=8.5)
+    ax.set_xlabel("x (px, from the probe's first column)")
+    ax.set_ylabel("y (px)")
+    if panels == 2:
+        synth = synthesize_texture(TextureModel.load(model), (tile, tile), seed=seed, iterations=3).image
+        ax2 = fig.add_subplot(1, 2, 2)
+        g2 = np.mean(np.asarray(synth), axis=-1) if np.ndim(synth) == 3 else np.asarray(synth)
+        im2 = ax2.imshow(g2, cmap="gray", vmin=lo, vmax=hi)
+        fig.colorbar(im2, ax=ax2, label=r"$\rho_d$ (mean RGB)", fraction=0.046)
+        ax2.set_title(f"synthesised {tile}×{tile} tile (texture.json)", fontsize=8.5)
+        ax2.set_xlabel("x (px)")
+        ax2.set_ylabel("y (px)")
+    fig.tight_layout()
+    return fig
+
+
+def gap_figure(result: CaptureResult) -> Figure | None:
+    """The missing-effect gap after each step, when ``wardjax diagnose`` wrote ``report.json`` beside the fit."""
+    found = sorted(result.folder.glob("**/report.json"))
+    if not found:
+        return None
+    rep = json.loads(found[0].read_text(encoding="utf-8"))
+    gaps, names = rep.get("gap"), ["baseline", *rep.get("found", [])]
+    if not gaps:
+        return None
+    fig = Figure(figsize=(5.0, 2.8), dpi=100)
+    ax = fig.add_subplot(1, 1, 1)
+    ax.plot(range(len(gaps)), gaps, "o-", color="C0")
+    ax.axhline(1.0, color="0.5", lw=0.8, ls="--", label="noise level")
+    ax.set_xticks(range(len(gaps)), names[: len(gaps)], rotation=20, fontsize=8)
+    ax.set_ylabel("gap (reduced χ²)")
+    ax.set_title(f"{result.name}: missing-effect discovery", fontsize=9)
+    ax.legend(fontsize=8, frameon=False)
+    fig.tight_layout()
+    return fig
+
+
+def batch_figure(results: list[CaptureResult], flags: dict[str, set[str]]) -> Figure:
+    """Each parameter ± 1σ across the captures of the batch; flagged outliers in red."""
+    fig = Figure(figsize=(7.0, 1.0 + 1.1 * len(PARAMETERS)), dpi=100)
+    x = np.arange(len(results))
+    for k, key in enumerate(PARAMETERS):
+        ax = fig.add_subplot(len(PARAMETERS), 1, k + 1)
+        v = np.array([r.value(key) for r in results])
+        bad = np.array([key in flags[r.name] for r in results])
+        ax.errorbar(x[~bad], v[~bad, 0], yerr=v[~bad, 1], fmt="o", color="C0", ms=4, capsize=2)
+        if bad.any():
+            ax.errorbar(x[bad], v[bad, 0], yerr=v[bad, 1], fmt="o", color="C3", ms=5, capsize=2, label="outlier")
+            ax.legend(fontsize=7, frameon=False, loc="upper right")
+        ax.set_ylabel(_LABELS[key], fontsize=8)
+        ax.set_xticks(x, [r.name for r in results] if k == len(PARAMETERS) - 1 else [], fontsize=7, rotation=30)
+    fig.suptitle("parameters ± 1σ across the batch", fontsize=9)
+    fig.tight_layout()
+    return fig

@@ -1,0 +1,69 @@
+"""``wardjax report``: the report notebook executed on a folder of fits, as one self-contained HTML file."""
+
+from __future__ import annotations
+
+import os
+import re
+import tempfile
+from pathlib import Path
+
+from .._files import write_bytes_atomic
+from ._collect import load_fits
+
+__all__ = ["REPORT_SUFFIXES", "write_report"]
+
+REPORT_SUFFIXES = (".html", ".ipynb")
+TEMPLATE = Path(__file__).with_name("template.ipynb")
+
+
+def write_report(fits_dir, out, *, timeout: int = 900) -> Path:
+    """Execute the report notebook on ``fits_dir`` and write it to ``out`` (``.html`` or ``.ipynb``).
+
+    The template (``wardjax/report/template.ipynb``) is run by papermill with
+    ``fits_dir`` as its parameter; ``.html`` is converted by nbconvert with the
+    code hidden and every image embedded, so the file opens in a browser with
+    no server and no other file.
+
+    Raises
+    ------
+    ValueError
+        ``fits_dir`` holds no finished capture, or ``out`` has another suffix or
+        cannot be written; before any notebook runs.
+    """
+    out = Path(out)
+    if out.suffix.lower() not in REPORT_SUFFIXES:
+        raise ValueError(f"{out}: unknown report type {out.suffix!r}, expected .html or .ipynb")
+    parent = out.resolve().parent
+    if parent.exists() and not (parent.is_dir() and os.access(parent, os.W_OK)):
+        raise ValueError(f"{out}: cannot write there ({parent} is not a writable folder)")
+    fits = Path(fits_dir).resolve()
+    load_fits(fits)  # one clear error for an empty or broken folder, before the kernel starts
+
+    import nbformat
+    import papermill
+
+    with tempfile.TemporaryDirectory() as tmp:
+        executed = Path(tmp) / "report.ipynb"
+        papermill.execute_notebook(
+            str(TEMPLATE),
+            str(executed),
+            parameters={"fits_dir": str(fits)},
+            kernel_name="python3",
+            progress_bar=False,
+            execution_timeout=timeout,
+            cwd=tmp,
+        )
+        nb = nbformat.read(executed, as_version=4)
+    if out.suffix.lower() == ".ipynb":
+        write_bytes_atomic(out, nbformat.writes(nb).encode())
+        return out
+    from nbconvert import HTMLExporter
+
+    exporter = HTMLExporter(
+        exclude_input=True, exclude_input_prompt=True, exclude_output_prompt=True, embed_images=True
+    )
+    body, _ = exporter.from_notebook_node(nb)
+    # Nothing from the network: the report has no code to run and no maths to typeset.
+    body = re.sub(r'<script[^>]*src="https?://[^"]*"[^>]*>\s*</script>', "", body)
+    write_bytes_atomic(out, body.encode("utf-8"))
+    return out
