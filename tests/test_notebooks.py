@@ -1,0 +1,33 @@
+"""The notebooks for fitting a folder of captures and for texture analysis and synthesis execute."""
+
+from pathlib import Path
+
+import nbformat
+import pytest
+from nbclient import NotebookClient
+
+NOTEBOOKS = Path(__file__).parents[1] / "notebooks"
+
+
+def _run(name: str) -> str:
+    nb = nbformat.read(NOTEBOOKS / name, as_version=4)
+    NotebookClient(nb, timeout=600, kernel_name="python3", resources={"metadata": {"path": str(NOTEBOOKS)}}).execute()
+    outs = [o for c in nb.cells if c.cell_type == "code" for o in c.get("outputs", [])]
+    assert not [o for o in outs if o.output_type == "error"]
+    assert any("image/png" in o.get("data", {}) for o in outs)
+    return "".join(o.get("text", "") for o in outs)
+
+
+@pytest.mark.slow
+def test_fit_folder_notebook_reports_honest_errors():
+    text = _run("fit_folder.ipynb")
+    assert "('desk', 'ok'), ('marble', 'ok'), ('satin', 'ok')" in text
+    rms_z = float(text.split("RMS z = ")[1].split(",")[0])
+    assert 0.3 < rms_z < 2.0  # reported σ of the right size against the truth
+
+
+def test_texture_notebook_synthesis_keeps_the_statistics():
+    text = _run("texture.ipynb")
+    ks = [float(x) for x in text.split("each iteration: ")[1].splitlines()[0].split(" → ")]
+    assert ks[-1] <= 0.05 < ks[0]
+    assert float(text.split("largest relative difference of the mean: ")[1].split()[0]) < 0.02
