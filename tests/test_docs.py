@@ -47,7 +47,7 @@ def test_every_public_name_is_in_the_api_reference(site):
     source = {
         name: mod
         for mod, name in re.findall(
-            r"^from \.(\w*) import (\w+) as \2$", (ROOT / "wardjax/__init__.py").read_text(), re.M
+            r"^\s*from \.(\w*) import (\w+) as \2$", (ROOT / "wardjax/__init__.py").read_text(), re.M
         )
     }
     missing = []
@@ -78,7 +78,7 @@ def test_stage_packages_list_their_reexports_in_all():
     ):
         mod = importlib.import_module(pkg)
         src = Path(mod.__file__).read_text(encoding="utf-8")
-        exported = set(re.findall(r"^from \S+ import (\w+) as \1$", src, re.M))
+        exported = set(re.findall(r"^\s*from \S+ import (\w+) as \1$", src, re.M))
         assert set(mod.__all__) == exported, pkg
 
 
