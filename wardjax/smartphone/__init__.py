@@ -41,6 +41,8 @@ from ._gratings import cpd_to_ppb as cpd_to_ppb
 from ._gratings import grating_image as grating_image
 from ._gratings import ppb_to_cpd as ppb_to_cpd
 from ._gratings import write_gratings as write_gratings
+from ._lobe_sd import lobe_sd_from_gonio as lobe_sd_from_gonio
+from ._lobe_sd import lobe_sd_percent_error as lobe_sd_percent_error
 from ._method import fit_smartphone as fit_smartphone
 from ..capture import Display as Display
 from ..capture import Viewing as Viewing
