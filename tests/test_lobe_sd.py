@@ -13,7 +13,10 @@ from wardjax.smartphone import lobe_sd_from_gonio, lobe_sd_percent_error
 def _reference_sd(sigma, floor, half_window, peak=0.0):
     """SD of (Gaussian + floor − its minimum on the window) by adaptive quadrature."""
     lo, hi = peak - half_window, peak + half_window
-    g = stats.norm(peak, sigma).pdf
+
+    def g(t):
+        return stats.norm.pdf(t, peak, sigma)
+
     vmin = min(g(lo), g(hi)) + floor
 
     def w(t):
@@ -28,7 +31,7 @@ def _reference_sd(sigma, floor, half_window, peak=0.0):
 @pytest.mark.parametrize(("sigma", "half_window"), [(0.3, 10.0), (2.0, 10.0), (2.0, 4.0), (5.0, 8.0)])
 def test_gaussian_lobe_on_a_floor_matches_quadrature(sigma, half_window):
     th = np.linspace(20.0 - half_window, 20.0 + half_window, 4001)
-    v = 3.0 * stats.norm(20.0, sigma).pdf(th) + 0.7  # lobe at the 20° specular angle, diffuse floor
+    v = 3.0 * stats.norm.pdf(th, 20.0, sigma) + 0.7  # lobe at the 20° specular angle, diffuse floor
     got = lobe_sd_from_gonio(th, v)
     ref = _reference_sd(sigma, 0.7, half_window)
     assert got == pytest.approx(ref, rel=1e-4)
@@ -39,20 +42,20 @@ def test_gaussian_lobe_on_a_floor_matches_quadrature(sigma, half_window):
 def test_uneven_angles_are_weighted_by_spacing():
     sigma = 1.5
     th = np.sort(np.r_[np.linspace(-12, 12, 200), np.linspace(-1, 1, 300)[1:-1] + 1e-3])
-    v = stats.norm(0.0, sigma).pdf(th) + 0.2
+    v = stats.norm.pdf(th, 0.0, sigma) + 0.2
     assert lobe_sd_from_gonio(th, v) == pytest.approx(_reference_sd(sigma, 0.2, 12.0), rel=2e-3)
 
 
 def test_invariances_and_batch_shape():
     th = np.linspace(-40.0, 80.0, 1201)  # ≥ 6σ either side of every lobe
     sig = np.array([[1.0, 2.0, 3.0], [4.0, 5.0, 6.0]])
-    v = stats.norm(20.0, sig[..., None]).pdf(th)
+    v = stats.norm.pdf(th, 20.0, sig[..., None])
     sd = lobe_sd_from_gonio(th, v)
     assert sd.shape == (2, 3)
     np.testing.assert_allclose(sd, sig, rtol=1e-3)
     # scale, floor and a shift of the lobe do not change the SD
     np.testing.assert_allclose(lobe_sd_from_gonio(th, 7.0 * v + 2.5), sd, rtol=1e-12)
-    np.testing.assert_allclose(lobe_sd_from_gonio(th, stats.norm(25.0, sig[..., None]).pdf(th)), sd, rtol=1e-3)
+    np.testing.assert_allclose(lobe_sd_from_gonio(th, stats.norm.pdf(th, 25.0, sig[..., None])), sd, rtol=1e-3)
 
 
 def test_flat_or_broken_curves_give_nan_and_bad_shapes_raise():
