@@ -26,7 +26,9 @@ from ._color import validate_region as validate_region
 from ._color import validate_rgb_image as validate_rgb_image
 from ._colorchecker import CameraCorrection as CameraCorrection
 from ._colorchecker import colorchecker_delta_E as colorchecker_delta_E
+from ._colorchecker import colorchecker_held_out_delta_E as colorchecker_held_out_delta_E
 from ._colorchecker import COLORCHECKER_NAMES as COLORCHECKER_NAMES
+from ._colorchecker import CORRECTION_METHODS as CORRECTION_METHODS
 from ._colorchecker import colorchecker_patch_regions as colorchecker_patch_regions
 from ._colorchecker import colorchecker_reference_Lab as colorchecker_reference_Lab
 from ._colorchecker import colorchecker_rho_d as colorchecker_rho_d
