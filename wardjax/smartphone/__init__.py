@@ -46,6 +46,13 @@ from ._gratings import write_gratings as write_gratings
 from ._lobe_sd import lobe_sd_from_gonio as lobe_sd_from_gonio
 from ._lobe_sd import lobe_sd_percent_error as lobe_sd_percent_error
 from ._method import fit_smartphone as fit_smartphone
+from ._threshold_model import CSF_METHODS as CSF_METHODS
+from ._threshold_model import csf_sensitivity as csf_sensitivity
+from ._threshold_model import CSFFit as CSFFit
+from ._threshold_model import fit_csf_modelfest as fit_csf_modelfest
+from ._threshold_model import load_modelfest as load_modelfest
+from ._threshold_model import screen_view_factor as screen_view_factor
+from ._threshold_model import threshold_ppb as threshold_ppb
 from ..capture import Display as Display
 from ..capture import Viewing as Viewing
 from ..capture import load_display as load_display
