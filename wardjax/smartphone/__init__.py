@@ -51,6 +51,7 @@ from ._threshold_model import csf_sensitivity as csf_sensitivity
 from ._threshold_model import CSFFit as CSFFit
 from ._threshold_model import fit_csf_modelfest as fit_csf_modelfest
 from ._threshold_model import load_modelfest as load_modelfest
+from ._threshold_model import lobe_sd_from_threshold as lobe_sd_from_threshold
 from ._threshold_model import screen_view_factor as screen_view_factor
 from ._threshold_model import threshold_ppb as threshold_ppb
 from ..capture import Display as Display

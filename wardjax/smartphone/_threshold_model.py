@@ -58,6 +58,7 @@ __all__ = [
     "CSFFit",
     "csf_sensitivity",
     "fit_csf_modelfest",
+    "lobe_sd_from_threshold",
     "load_modelfest",
     "screen_view_factor",
     "threshold_ppb",
@@ -208,3 +209,29 @@ def threshold_ppb(
         lo, hi = np.where(up, mid, lo), np.where(up, hi, mid)
     f_star = np.where(vis_hi, f_hi, np.where(vis_lo, np.exp(0.5 * (lo + hi)), f_lo))
     return np.asarray(np.clip(np.asarray(cpd_to_ppb(f_star, disp, view)), disp.ppb_min, disp.ppb_max))
+
+
+def lobe_sd_from_threshold(
+    ppb: ArrayLike,
+    rho_d: ArrayLike,
+    *,
+    sd_range_deg: tuple[float, float] = (1e-3, 300.0),
+    **model,
+) -> NDArray:
+    """Lobe SD (degrees) whose predicted threshold is ``ppb``: :func:`threshold_ppb` inverted.
+
+    The predicted PPB rises monotonically with the lobe SD, so bisection in log SD over
+    ``sd_range_deg`` (60 halvings) inverts it; ``model`` passes ``rho_s``, ``csf``,
+    ``ambient_cd_m2``, ``display`` and ``viewing`` through. A PPB at or below the mirror's
+    threshold gives the range's low end, one above the range's prediction its high end.
+    """
+    target, rd = np.broadcast_arrays(np.asarray(ppb, np.float64), np.asarray(rho_d, np.float64))
+    if np.any(~(target > 0)):
+        raise ValueError(f"ppb must be > 0; got {ppb!r}")
+    lo = np.full(target.shape, np.log(sd_range_deg[0]))
+    hi = np.full(target.shape, np.log(sd_range_deg[1]))
+    for _ in range(60):
+        mid = 0.5 * (lo + hi)
+        above = threshold_ppb(np.exp(mid), rd, **model) > target
+        lo, hi = np.where(above, lo, mid), np.where(above, mid, hi)
+    return np.asarray(np.exp(0.5 * (lo + hi)))
