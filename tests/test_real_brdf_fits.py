@@ -29,7 +29,7 @@ def test_csv_covers_every_material_model_and_normalisation():
     for r in rows:
         assert r["status"] in names
         assert float(r["reduced_chi2"]) > 0 and 0 <= float(r["rel_rms"]) < 10
-    # Ward misses CUReT at its measured noise: every sample's reduced χ² is well above 1
+    # Ward misses CUReT at its measured noise: the typical reduced χ² is well above 1
     chi = np.array([float(r["reduced_chi2"]) for r in rows if r["source"] == "curet"])
     assert np.median(chi) > 5
 
