@@ -34,6 +34,7 @@ from .smartphone import AlphaPosterior as AlphaPosterior
 from .smartphone import NotConvergedError as NotConvergedError
 from .smartphone import cpd_to_ppb as cpd_to_ppb
 from .smartphone import fit_smartphone as fit_smartphone
+from .smartphone import lobe_sd_from_gonio as lobe_sd_from_gonio
 from .smartphone import ppb_to_cpd as ppb_to_cpd
 from .smartphone import write_gratings as write_gratings
 from .run import BatchItem as BatchItem

@@ -26,7 +26,9 @@ from ._color import validate_region as validate_region
 from ._color import validate_rgb_image as validate_rgb_image
 from ._colorchecker import CameraCorrection as CameraCorrection
 from ._colorchecker import colorchecker_delta_E as colorchecker_delta_E
+from ._colorchecker import colorchecker_held_out_delta_E as colorchecker_held_out_delta_E
 from ._colorchecker import COLORCHECKER_NAMES as COLORCHECKER_NAMES
+from ._colorchecker import CORRECTION_METHODS as CORRECTION_METHODS
 from ._colorchecker import colorchecker_patch_regions as colorchecker_patch_regions
 from ._colorchecker import colorchecker_reference_Lab as colorchecker_reference_Lab
 from ._colorchecker import colorchecker_rho_d as colorchecker_rho_d
@@ -41,7 +43,17 @@ from ._gratings import cpd_to_ppb as cpd_to_ppb
 from ._gratings import grating_image as grating_image
 from ._gratings import ppb_to_cpd as ppb_to_cpd
 from ._gratings import write_gratings as write_gratings
+from ._lobe_sd import lobe_sd_from_gonio as lobe_sd_from_gonio
+from ._lobe_sd import lobe_sd_percent_error as lobe_sd_percent_error
 from ._method import fit_smartphone as fit_smartphone
+from ._threshold_model import CSF_METHODS as CSF_METHODS
+from ._threshold_model import csf_sensitivity as csf_sensitivity
+from ._threshold_model import CSFFit as CSFFit
+from ._threshold_model import fit_csf_modelfest as fit_csf_modelfest
+from ._threshold_model import load_modelfest as load_modelfest
+from ._threshold_model import lobe_sd_from_threshold as lobe_sd_from_threshold
+from ._threshold_model import screen_view_factor as screen_view_factor
+from ._threshold_model import threshold_ppb as threshold_ppb
 from ..capture import Display as Display
 from ..capture import Viewing as Viewing
 from ..capture import load_display as load_display

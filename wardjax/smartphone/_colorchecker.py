@@ -5,27 +5,31 @@
   2014"``, X-Rite's) or computed from its reflectance spectra under D50.
 - :func:`simulate_colorchecker_photo`: a synthetic, ideal camera's photo of the chart.
 - :func:`colorchecker_patch_regions`: patch boxes from a manual grid layout.
-- :func:`fit_camera_correction`: a chart-based camera correction (a per-channel power
-  and a 3×3 matrix in linear RGB, white E) fitted on CIELAB differences.
+- :func:`fit_camera_correction`: a chart-based camera correction: a tone exponent from the
+  neutral patches, then colour-science's characterisation (``"Finlayson 2015"``
+  root-polynomial by default, ``"Cheung 2004"`` polynomial) in linear RGB, white E.
+- :func:`colorchecker_held_out_delta_E`: its leave-one-out ΔE*ab per patch.
 """
 
 from __future__ import annotations
 
 import io
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import colour
 import imageio.v3 as iio
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from ._color import delta_E_CIE1976, diffuse_from_srgb, diffuse_to_Lab
+from ._color import Lab_to_diffuse, delta_E_CIE1976, diffuse_from_srgb, diffuse_to_Lab, luminance_from_rho_d
 
 __all__ = [
     "COLORCHECKER_NAMES",
+    "CORRECTION_METHODS",
     "CameraCorrection",
     "colorchecker_delta_E",
+    "colorchecker_held_out_delta_E",
     "colorchecker_patch_regions",
     "colorchecker_reference_Lab",
     "colorchecker_rho_d",
@@ -160,24 +164,57 @@ def colorchecker_rho_d(image: ArrayLike, regions, *, decoding: str = "gamma2.2")
     return np.array([diffuse_from_srgb(image, r, decoding=decoding) for r in regions])
 
 
+CORRECTION_METHODS: tuple[str, ...] = ("Finlayson 2015", "Cheung 2004", "Vandermonde")
+"""colour-science's colour-correction methods (``colour.MATRIX_COLOUR_CORRECTION_METHODS``)."""
+
+_NEUTRAL_CHROMA = 4.0  # C*ab below which a reference patch counts as neutral (the chart's greys: < 1.5)
+
+
 @dataclass(frozen=True)
 class CameraCorrection:
-    """``ρd' = M · ρd^γ`` (power per channel, then a 3×3 matrix), in linear RGB (white E).
+    """Chart-based camera correction: a tone exponent, then colour-science's colour correction.
 
-    ``γ`` corrects a camera whose tone curve is not the assumed decoding (γ = 1: none);
-    ``M`` its primaries and white balance.
+    ``ρd' = apply_matrix_colour_correction(ρd^γ, M, method, **options)`` in linear RGB (sRGB
+    primaries, white E). ``γ`` corrects a camera whose tone curve is not the assumed
+    decoding (γ = 1: none); ``M`` (3 × terms) maps the ``method``'s expansion of the
+    linearised RGB to the reference: for ``"Finlayson 2015"`` the root-polynomial terms of
+    ``degree`` (e.g. degree 2: R, G, B, √RG, √GB, √RB — exposure-invariant), for
+    ``"Cheung 2004"`` a polynomial of ``terms`` terms (3: a plain 3×3 matrix).
     """
 
     gamma: float
+    method: str
     matrix: NDArray
+    options: dict = field(default_factory=dict)
 
     def apply(self, rho_d: ArrayLike) -> NDArray:
         r = np.clip(np.asarray(rho_d, dtype=np.float64), 1e-6, None)
-        return r**self.gamma @ self.matrix.T
+        out = colour.characterisation.apply_matrix_colour_correction(
+            r**self.gamma, self.matrix, method=self.method, **self.options
+        )
+        return np.asarray(out)
 
 
-def fit_camera_correction(rho_d: ArrayLike, reference_Lab: ArrayLike, *, tone: bool = True) -> CameraCorrection:
-    """Fit :class:`CameraCorrection` to chart patches by least squares on CIELAB (D50) differences.
+def _tone_exponent(x: NDArray, ref_rgb: NDArray, reference_Lab: NDArray) -> float:
+    """γ of ``Y_ref ∝ Y(ρd)^γ``, by a log–log line through the chart's neutral patches."""
+    neutral = np.hypot(reference_Lab[:, 1], reference_Lab[:, 2]) < _NEUTRAL_CHROMA
+    if neutral.sum() < 2:
+        raise ValueError(f"the tone exponent needs ≥ 2 neutral patches (C*ab < {_NEUTRAL_CHROMA}); got {neutral.sum()}")
+    y_cam = np.asarray(luminance_from_rho_d(x[neutral]))
+    y_ref = np.asarray(luminance_from_rho_d(ref_rgb[neutral]))
+    return float(np.polyfit(np.log(y_cam), np.log(y_ref), 1)[0])
+
+
+def fit_camera_correction(
+    rho_d: ArrayLike,
+    reference_Lab: ArrayLike,
+    *,
+    method: str = "Finlayson 2015",
+    degree: int = 2,
+    terms: int = 3,
+    tone: bool = True,
+) -> CameraCorrection:
+    """Fit a :class:`CameraCorrection` to chart patches with colour-science's characterisation.
 
     Parameters
     ----------
@@ -185,31 +222,60 @@ def fit_camera_correction(rho_d: ArrayLike, reference_Lab: ArrayLike, *, tone: b
         The method's ρd of the patches, (N, 3); leave out clipped patches.
     reference_Lab
         Their reference CIELAB under D50, (N, 3).
+    method
+        One of :data:`CORRECTION_METHODS`: ``"Finlayson 2015"`` (root-polynomial, Finlayson,
+        Mackiewicz & Hurlbert 2015, of ``degree``), ``"Cheung 2004"`` (polynomial of ``terms``
+        terms) or ``"Vandermonde"`` (of ``degree``).
     tone
-        Fit the exponent γ too (10 parameters, N ≥ 4); else γ = 1 (a plain 3×3 matrix, N ≥ 3).
+        First fit the tone exponent γ: a straight line of log reference luminance against
+        log camera luminance through the neutral patches among ``rho_d`` (reference
+        C*ab < 4); else γ = 1.
 
-    The residuals are the Lab differences, so the fit minimises Σ ΔE*ab² directly.
+    The references are taken to linear RGB (sRGB primaries, white E) through CIELAB D50, and
+    ``colour.matrix_colour_correction`` fits ``M`` by least squares on those values.
     """
-    from scipy.optimize import least_squares
-
     x = np.asarray(rho_d, dtype=np.float64)
     ref = np.asarray(reference_Lab, dtype=np.float64)
-    need = 4 if tone else 3
-    if x.ndim != 2 or x.shape[-1] != 3 or x.shape[0] < need or ref.shape != x.shape:
-        raise ValueError(f"rho_d and reference_Lab must both be (N ≥ {need}, 3); got {x.shape} and {ref.shape}")
+    if method not in CORRECTION_METHODS:
+        raise ValueError(f"method must be one of {CORRECTION_METHODS}; got {method!r}")
+    options = {"terms": int(terms)} if method == "Cheung 2004" else {"degree": int(degree)}
+    if x.ndim != 2 or x.shape[-1] != 3 or ref.shape != x.shape:
+        raise ValueError(f"rho_d and reference_Lab must both be (N, 3); got {x.shape} and {ref.shape}")
     x = np.clip(x, 1e-6, None)
+    ref_rgb = np.asarray(Lab_to_diffuse(ref, "D50"))
+    g = _tone_exponent(x, ref_rgb, ref) if tone else 1.0
+    n_terms = np.asarray(colour.characterisation.polynomial_expansion(x[:2], method, **options)).shape[-1]
+    if x.shape[0] < n_terms:
+        raise ValueError(f"{method} with {options} has {n_terms} terms; it needs ≥ {n_terms} patches, got {x.shape[0]}")
+    m = colour.matrix_colour_correction(x**g, ref_rgb, method=method, **options)
+    return CameraCorrection(gamma=g, method=method, matrix=np.asarray(m), options=options)
 
-    def unpack(p):
-        return (float(np.exp(p[0])) if tone else 1.0), p[-9:].reshape(3, 3)
 
-    def residual(p):
-        g, m = unpack(p)
-        return (diffuse_to_Lab(np.clip(x**g @ m.T, 1e-6, None), "D50") - ref).ravel()
+def colorchecker_held_out_delta_E(
+    rho_d: ArrayLike,
+    reference_Lab: ArrayLike,
+    *,
+    usable: ArrayLike | None = None,
+    **fit_options,
+) -> NDArray:
+    """Leave-one-out ΔE*ab (D50) of :func:`fit_camera_correction` over a chart's patches.
 
-    p0 = np.r_[[0.0] if tone else [], np.eye(3).ravel()]
-    sol = least_squares(residual, p0)
-    g, m = unpack(sol.x)
-    return CameraCorrection(gamma=g, matrix=m)
+    Each usable patch is corrected by a fit on all the other usable patches and compared with
+    its reference; unusable patches (e.g. clipped ones, ``usable`` False) are neither fitted
+    nor scored (NaN). ``fit_options`` go to :func:`fit_camera_correction`. Shape (N,).
+    """
+    x = np.asarray(rho_d, dtype=np.float64)
+    ref = np.asarray(reference_Lab, dtype=np.float64)
+    ok = np.ones(x.shape[0], bool) if usable is None else np.asarray(usable, bool)
+    if ok.shape != x.shape[:1]:
+        raise ValueError(f"usable must have shape ({x.shape[0]},); got {ok.shape}")
+    out = np.full(x.shape[0], np.nan)
+    for k in np.flatnonzero(ok):
+        fit = ok.copy()
+        fit[k] = False
+        corr = fit_camera_correction(x[fit], ref[fit], **fit_options)
+        out[k] = float(colorchecker_delta_E(corr.apply(x[k : k + 1]), ref[k : k + 1])[0])
+    return out
 
 
 def colorchecker_delta_E(rho_d: ArrayLike, reference_Lab: ArrayLike) -> NDArray:
