@@ -93,6 +93,7 @@ __all__ = [
     "NotConvergedError",
     "cpd_to_ppb",
     "fit_smartphone",
+    "lobe_sd_from_gonio",
     "ppb_to_cpd",
     "write_gratings",
     "BatchItem",
