@@ -235,8 +235,9 @@ def radiance_render_rig(
         write_bytes_atomic(tmp / "scene.rad", scene.encode())
         octree = _run([str(pyradiance.BINPATH / "oconv"), "-f", "scene.rad"], tmp)
         write_bytes_atomic(tmp / "scene.oct", octree)
-        settings = list(RTRACE_SETTINGS)
-        settings[settings.index("-av") + 1 : settings.index("-av") + 4] = [_f(ambient)] * 3
+        settings: list[str] = list(RTRACE_SETTINGS)
+        i = settings.index("-av")
+        settings[i + 1 : i + 4] = [_f(ambient)] * 3
         cmd = [str(pyradiance.BINPATH / "rtrace"), "-h", "-fff", "-n", str(int(processes)), *settings, "scene.oct"]
         out = _run(cmd, tmp, rays.tobytes())
     values = np.frombuffer(out, np.float32).reshape(rays.shape[:-1] + (3,))
@@ -246,12 +247,14 @@ def radiance_render_rig(
 def _texture_pattern(tmp: Path, rig: Rig, material: str, texture, spacing: float) -> tuple[str, str]:
     """Write the ``colordata`` files of a ρd texture; return the pattern's definition and its name."""
     words = [w for line in material.splitlines() if not line.lstrip().startswith("#") for w in line.split()]
-    mean = np.asarray([float(w) for w in words[-5:-2]]) if words[1] == "plastic" else None
-    if mean is None:
-        raise ValueError(f"texture: a textured probe needs a 'plastic' material, got {words[1]!r}")
+    if words[1] not in ("plastic", "plastic2"):
+        raise ValueError(f"texture: a textured probe needs a 'plastic' or 'plastic2' material, got {words[1]!r}")
+    n_str = int(words[3])
+    n_int = int(words[4 + n_str])
+    reals = [float(w) for w in words[6 + n_str + n_int :]]  # colour r g b, spec, roughness(es)
+    mean, spec = np.asarray(reals[:3]), reals[3]
     xs, ys, grid = texture_grid(texture, rig.probe_box(), spacing)
     rad = radiance_rgb(grid.reshape(-1, 3)).reshape(grid.shape)
-    spec = float(words[-2])
     ratio = rad / (mean * (1.0 - spec))  # the pattern multiplies colour·(1 − spec) = Radiance ρd
     for c, name in enumerate("rgb"):
         write_bytes_atomic(tmp / f"rho_{name}.dat", _data_file(xs, ys, ratio[..., c]))
