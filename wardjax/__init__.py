@@ -49,6 +49,7 @@ from .export import radiance_rgb as radiance_rgb
 from .export import write_capture_outputs as write_capture_outputs
 from .render import radiance_render_rig as radiance_render_rig
 from .render import render_rig as render_rig
+from .render import slanted_edge_mtf as slanted_edge_mtf
 from .geometry import Camera as Camera
 from .geometry import PixelGeometry as PixelGeometry
 from .geometry import Rig as Rig

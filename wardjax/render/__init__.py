@@ -7,3 +7,5 @@ from ._radiance import rig_rays as rig_rays
 from ._radiance import rig_scene as rig_scene
 from ._radiance import texture_grid as texture_grid
 from ._jax import render_rig as render_rig
+from ._mtf import EdgeMTF as EdgeMTF
+from ._mtf import slanted_edge_mtf as slanted_edge_mtf
