@@ -40,7 +40,7 @@ def _jax(params, rig, **kw):
         return np.asarray(render_rig(params, rig, lamp_radiance=L, dtype=jnp.float64, **kw))
 
 
-def _compared(rig):
+def _compared(rig, grazing_cut: bool = True):
     """Pixels on the probe or the standard, away from grazing directions and the rectangles' edges (0.5 mm)."""
     g = pixel_geometry(rig, *np.meshgrid(np.arange(rig.camera.width), np.arange(rig.camera.height)))
     x, y = np.nan_to_num(g.points[..., 0]), np.nan_to_num(g.points[..., 1])
@@ -48,7 +48,8 @@ def _compared(rig):
     def inside(box):
         return (x > box[0] + 0.5) & (x < box[1] - 0.5) & (y > box[2] + 0.5) & (y < box[3] - 0.5)
 
-    ok = (g.wi[..., 2] > GRAZING_COS) & (g.wo[..., 2] > GRAZING_COS)
+    cut = GRAZING_COS if grazing_cut else 0.0
+    ok = (g.wi[..., 2] > cut) & (g.wo[..., 2] > cut)
     return np.nan_to_num(ok, nan=False) & (inside(rig.probe_box()) | inside(rig.standard_box()))
 
 
@@ -101,7 +102,7 @@ def test_04_source_size_widens_the_lobe():
     """A large lamp (r = 40 mm): Radiance agrees with a² = α² + ω/4π and not with α alone."""
     p = wj.WardParams(rho_d=(0.1, 0.1, 0.1), rho_s=0.08, alpha_x=0.04, alpha_y=0.04)
     rad = radiance_render_rig(RIG, radiance_material(p), lamp_radius=40.0, lamp_radiance=L)
-    m = _compared(RIG) & (RIG.camera.position[0] == 0)
+    m = _compared(RIG)
     with_size = _jax(p, RIG, lamp_radius=40.0)
     without = _jax(p, RIG, lamp_radius=40.0, source_size=False)
     assert np.max(np.abs(rad[m] / with_size[m] - 1)) < 1e-4
@@ -109,15 +110,16 @@ def test_04_source_size_widens_the_lobe():
 
 
 def test_05_grazing_rig():
-    """Camera and lamp 12° above the plane: still per-pixel equal outside the stated grazing region."""
-    cam = dataclasses.replace(RIG.camera, position=(0.0, -500.0, 110.0))
-    rig = dataclasses.replace(RIG, lamp=(0.0, 500.0, 110.0), camera=cam)
+    """Camera and lamp 4.6° above the plane 500 mm away: every sample pixel lies within the stated grazing region
+    (3.5–5° from the horizon), and Radiance and JAX still agree there (measured 2e-6)."""
+    cam = dataclasses.replace(RIG.camera, position=(0.0, -500.0, 40.0))
+    rig = dataclasses.replace(RIG, lamp=(0.0, 500.0, 40.0), camera=cam)
     p = MATERIALS["plastic2"]
     rad = radiance_render_rig(rig, radiance_material(p), lamp_radiance=L)
     ref = _jax(p, rig)
-    m = _compared(rig)
-    assert m.sum() > 300
-    assert np.max(np.abs(rad[m] / ref[m] - 1)) <= 0.05
+    m = _compared(rig, grazing_cut=False)
+    assert m.sum() > 100 and not np.any(m & _compared(rig))
+    assert np.max(np.abs(rad[m] / ref[m] - 1)) <= 1e-4
 
 
 def test_06_texture_pattern_is_bilinear_in_the_grid():

@@ -2,9 +2,10 @@
 
 The package namespace is the public API; everything is re-exported explicitly
 from the stage packages, in the order of the flow: ``capture`` → ``reconstruct``
-→ ``fit`` → ``texture`` → ``smartphone`` → ``export``, with ``simulate`` its
-mirror image, ``effects`` on top, and ``run`` (end-to-end fits, batches, the
-CLI) over all of them. Importing wardjax never changes global JAX settings:
+→ ``fit`` → ``texture`` → ``smartphone`` → ``export`` → ``render`` (Radiance and
+JAX renders of the rig, the slanted-edge MTF), with ``simulate`` the mirror image
+of the flow, ``effects`` on top, and ``run`` (end-to-end fits, batches, the CLI)
+over all of them. Importing wardjax never changes global JAX settings:
 fits run in float64 inside a scoped ``jax.enable_x64(True)``.
 """
 
