@@ -32,6 +32,7 @@ them) and ``-u-`` (correlated sampling: the same render every time).
 
 from __future__ import annotations
 
+import importlib.util
 import math
 import os
 import subprocess
@@ -214,8 +215,7 @@ def radiance_render_rig(
         the scene's units), converted to wardjax's linear RGB (sRGB primaries,
         white E): :func:`from_radiance_rgb`.
     """
-    import pyradiance  # also puts Radiance's function files on RAYPATH
-
+    bindir, libdir = _radiance_paths()
     rays = rig_rays(rig, rows)
     with tempfile.TemporaryDirectory(prefix="wardjax-radiance-") as tmp:
         tmp = Path(tmp)
@@ -233,13 +233,13 @@ def radiance_render_rig(
             texture=pattern,
         )
         write_bytes_atomic(tmp / "scene.rad", scene.encode())
-        octree = _run([str(pyradiance.BINPATH / "oconv"), "-f", "scene.rad"], tmp)
+        octree = _run([str(bindir / "oconv"), "-f", "scene.rad"], tmp, libdir)
         write_bytes_atomic(tmp / "scene.oct", octree)
         settings: list[str] = list(RTRACE_SETTINGS)
         i = settings.index("-av")
         settings[i + 1 : i + 4] = [_f(ambient)] * 3
-        cmd = [str(pyradiance.BINPATH / "rtrace"), "-h", "-fff", "-n", str(int(processes)), *settings, "scene.oct"]
-        out = _run(cmd, tmp, rays.tobytes())
+        cmd = [str(bindir / "rtrace"), "-h", "-fff", "-n", str(int(processes)), *settings, "scene.oct"]
+        out = _run(cmd, tmp, libdir, rays.tobytes())
     values = np.frombuffer(out, np.float32).reshape(rays.shape[:-1] + (3,))
     return from_radiance_rgb(values.astype(np.float64))
 
@@ -262,8 +262,19 @@ def _texture_pattern(tmp: Path, rig: Rig, material: str, texture, spacing: float
     return head, "rho_texture"
 
 
-def _run(cmd: list[str], cwd: Path, stdin: bytes | None = None) -> bytes:
+def _radiance_paths() -> tuple[Path, Path]:
+    """pyradiance's ``bin`` and ``lib`` folders, found without importing it (its import edits ``os.environ``)."""
+    spec = importlib.util.find_spec("pyradiance")
+    if spec is None or not spec.submodule_search_locations:
+        raise ModuleNotFoundError("wardjax.render needs pyradiance (pip install pyradiance): it ships Radiance")
+    root = Path(next(iter(spec.submodule_search_locations)))
+    return root / "bin", root / "lib"
+
+
+def _run(cmd: list[str], cwd: Path, libdir: Path, stdin: bytes | None = None) -> bytes:
+    """Run a Radiance program with its function files (``rayinit.cal``…) on ``RAYPATH``, for this call only."""
     env = dict(os.environ)
+    env["RAYPATH"] = os.pathsep.join([".", str(libdir), *filter(None, env.get("RAYPATH", "").split(os.pathsep))])
     res = subprocess.run(cmd, cwd=cwd, input=stdin, capture_output=True, env=env, check=False)
     if res.returncode != 0:
         raise RuntimeError(f"{Path(cmd[0]).name} failed (exit {res.returncode}): {res.stderr.decode().strip()}")
