@@ -21,7 +21,19 @@ PACKAGE = Path(__file__).resolve().parents[1] / "wardjax"
 # The flow, written once. A module may import modules of its own stage and of
 # earlier ones; the base is shared by every stage.
 BASE = ("wardjax.ward", "wardjax.geometry", "wardjax._files", "wardjax._status", "wardjax._shapes", "wardjax._data")
-STAGES = ("capture", "reconstruct", "fit", "texture", "smartphone", "export", "simulate", "effects", "report", "run")
+STAGES = (
+    "capture",
+    "reconstruct",
+    "fit",
+    "texture",
+    "smartphone",
+    "export",
+    "render",
+    "simulate",
+    "effects",
+    "report",
+    "run",
+)
 
 MAX_MODULE_LINES = 700
 MAX_FUNCTION_LINES = 120

@@ -71,6 +71,7 @@ def test_stage_packages_list_their_reexports_in_all():
         "wardjax.texture",
         "wardjax.smartphone",
         "wardjax.export",
+        "wardjax.render",
         "wardjax.simulate",
         "wardjax.effects",
         "wardjax.report",

@@ -2,9 +2,10 @@
 
 The package namespace is the public API; everything is re-exported explicitly
 from the stage packages, in the order of the flow: ``capture`` → ``reconstruct``
-→ ``fit`` → ``texture`` → ``smartphone`` → ``export``, with ``simulate`` its
-mirror image, ``effects`` on top, and ``run`` (end-to-end fits, batches, the
-CLI) over all of them. Importing wardjax never changes global JAX settings:
+→ ``fit`` → ``texture`` → ``smartphone`` → ``export`` → ``render`` (Radiance and
+JAX renders of the rig, the slanted-edge MTF), with ``simulate`` the mirror image
+of the flow, ``effects`` on top, and ``run`` (end-to-end fits, batches, the CLI)
+over all of them. Importing wardjax never changes global JAX settings:
 fits run in float64 inside a scoped ``jax.enable_x64(True)``.
 """
 
@@ -48,6 +49,9 @@ from .export import radiance_material as radiance_material
 from .export import radiance_metal as radiance_metal
 from .export import radiance_rgb as radiance_rgb
 from .export import write_capture_outputs as write_capture_outputs
+from .render import radiance_render_rig as radiance_render_rig
+from .render import render_rig as render_rig
+from .render import slanted_edge_mtf as slanted_edge_mtf
 from .geometry import Camera as Camera
 from .geometry import PixelGeometry as PixelGeometry
 from .geometry import Rig as Rig
@@ -107,6 +111,9 @@ __all__ = [
     "radiance_metal",
     "radiance_rgb",
     "write_capture_outputs",
+    "radiance_render_rig",
+    "render_rig",
+    "slanted_edge_mtf",
     "Camera",
     "PixelGeometry",
     "Rig",

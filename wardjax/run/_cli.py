@@ -233,8 +233,15 @@ def fit_cmd(paths: tuple[Path, ...], out_dir: Path, force: bool, quiet: bool) ->
     help="Image width and height in pixels.",
 )
 @click.option("--seed", type=int, default=0, show_default=True)
+@click.option(
+    "--renderer",
+    type=click.Choice(["wardjax", "radiance"]),
+    default="wardjax",
+    show_default=True,
+    help="Who draws the images: wardjax's forward model, or Radiance (rtrace) from the exported material.",
+)
 def simulate_cmd(
-    out_dir, material, rho_d, rho_s, alpha_x, alpha_y, texture, encoding, bit_depth, image_format, size, seed
+    out_dir, material, rho_d, rho_s, alpha_x, alpha_y, texture, encoding, bit_depth, image_format, size, seed, renderer
 ) -> None:
     """Write a simulated capture folder (lit/dark images + capture.toml + truth) to OUT_DIR."""
     from .._data import table1_materials
@@ -256,12 +263,13 @@ def simulate_cmd(
             encoding=encoding,
             bit_depth=int(bit_depth),
             image_format=image_format,
+            renderer=renderer,
         )
     except ValueError as e:
         _fail(str(e).splitlines()[0])
     console.print(
         f"wrote capture [bold]{cap.name}[/] ({cap.rig.camera.width}×{cap.rig.camera.height}, "
-        f"{encoding} {bit_depth}-bit {image_format}) to {out_dir}/"
+        f"{encoding} {bit_depth}-bit {image_format}, drawn by {renderer}) to {out_dir}/"
     )
 
 
