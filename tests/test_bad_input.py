@@ -521,3 +521,20 @@ def test_a_probe_saturated_over_half_its_pixels_is_refused(tmp_path):
     out = tmp_path / "out"
     line = _refused(["fit", str(cap), "--out", str(out), "--quiet"], "lit.png", unwritten=[out / "bright"])
     assert "of the probe's pixels are saturated" in line
+
+
+@pytest.mark.slow  # a real fit at 160 × 120: ~35 s on a loaded 2-core machine
+def test_scanlines_at_the_step_limit_are_said_in_the_output(tmp_path):
+    # The desk of Table 1 at 160 × 120: a third of its scanlines run out of steps (22 of 55 when measured).
+    from wardjax._data import table1_materials
+
+    cap = tmp_path / "desk"
+    wj.simulate_capture(table1_materials()["desk"], cap, seed=0, image_size=(160, 120), model="anisotropic")
+    out = tmp_path / "out"
+    res = CliRunner().invoke(main, ["fit", str(cap), "--out", str(out)])
+    assert res.exit_code == 0, res.output
+    scan = json.loads((out / "desk" / "params.json").read_text())["fit"]["diagnostics"]["scanlines"]
+    stopped = scan["status"].get("max_steps", 0)
+    assert stopped > 0, scan
+    said = [ln for ln in res.output.splitlines() if "stopped at the step limit" in ln]
+    assert len(said) == 1 and f"desk: {stopped} of {scan['count']} scanlines" in said[0], res.output

@@ -11,6 +11,7 @@ if TYPE_CHECKING:  # the API as the type checker and the reader see it
     from ._batch import BatchItem as BatchItem
     from ._batch import find_captures as find_captures
     from ._batch import run_batch as run_batch
+    from ._batch import scanline_note as scanline_note
     from ._cli import main as main
     from ._demo import run_capture_demo as run_capture_demo
     from ._fit_capture import CaptureFit as CaptureFit
@@ -22,6 +23,7 @@ _API = {
     "BatchItem": "._batch",
     "find_captures": "._batch",
     "run_batch": "._batch",
+    "scanline_note": "._batch",
     "main": "._cli",
     "run_capture_demo": "._demo",
     "CaptureFit": "._fit_capture",

@@ -155,6 +155,25 @@ def _row(item: BatchItem) -> dict:
     return row
 
 
+def scanline_note(doc: dict | None) -> str | None:
+    """One line on the scanlines of a finished fit that stopped at the step limit, or ``None`` if none did.
+
+    Such a scanline's parameters are the best point found, not certified
+    (:class:`~wardjax.Status` ``MAX_STEPS``); the count is in ``params.json``
+    ``fit.diagnostics.scanlines.status`` and is said, never left silent.
+    """
+    if not doc:
+        return None
+    scan = doc.get("fit", {}).get("diagnostics", {}).get("scanlines", {})
+    stopped, total = int(scan.get("status", {}).get("max_steps", 0)), int(scan.get("count", 0))
+    if stopped == 0:
+        return None
+    return (
+        f"{stopped} of {total} scanlines stopped at the step limit (status max_steps): their parameters are the "
+        f"best point found, not certified; the joint fit is {doc['fit'].get('status', '?')}"
+    )
+
+
 def _num(x) -> str:
     return "" if x is None else f"{float(x):.6g}"
 

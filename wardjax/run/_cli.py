@@ -247,7 +247,7 @@ def fit_cmd(paths: tuple[Path, ...], out_dir: Path, force: bool, quiet: bool) ->
     """
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
-    from ._batch import run_batch
+    from ._batch import run_batch, scanline_note
 
     err = Console(stderr=True)
     missing = [str(p) for p in paths if not p.exists()]
@@ -298,6 +298,9 @@ def fit_cmd(paths: tuple[Path, ...], out_dir: Path, force: bool, quiet: bool) ->
             else:
                 t.add_row(it.name, "[red]error[/]", "", "", "", "")
         console.print(t)
+        for it in items:  # limits that were hit are said, not left in params.json alone
+            if note := scanline_note(it.params):
+                console.print(f"note: {it.name}: {note}", highlight=False, soft_wrap=True)
     if any(it.status == "error" for it in items):
         sys.exit(2)
 
