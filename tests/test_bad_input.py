@@ -538,3 +538,63 @@ def test_scanlines_at_the_step_limit_are_said_in_the_output(tmp_path):
     assert stopped > 0, scan
     said = [ln for ln in res.output.splitlines() if "stopped at the step limit" in ln]
     assert len(said) == 1 and f"desk: {stopped} of {scan['count']} scanlines" in said[0], res.output
+
+
+FUZZ_FIELDS = (
+    "rho_standard",
+    "images__bit_depth",
+    "images__encoding",
+    "rig__lamp",
+    "rig__camera",
+    "camera__look_at",
+    "camera__up",
+    "camera__focal_px",
+    "camera__principal_point",
+    "camera__image_size",
+    "regions__probe",
+    "material__tangent",
+    "fit__noise_floor",
+    "fit__smooth_standard_px",
+)
+
+
+def _fuzz_value(rng: np.random.Generator):
+    """A value of a random kind: booleans, strings, non-finite and huge numbers, lists of any length, tables."""
+    scalars = [True, False, 0, -1, 1e30, -1e30, 1e-300, float("nan"), float("inf"), "", "12", 0.5, 640.0, 2**63 - 1]
+    kind = rng.integers(4)
+    if kind == 0:
+        return scalars[rng.integers(len(scalars))]
+    if kind == 1:
+        return [scalars[rng.integers(len(scalars))] for _ in range(rng.integers(0, 6))]
+    if kind == 2:
+        return [float(v) for v in rng.normal(0, 10.0 ** rng.integers(-3, 35), rng.integers(1, 5))]
+    return {"x": 1.0}
+
+
+def test_seeded_fuzz_of_capture_toml_never_escapes_the_rules(good, tmp_path, rng):
+    """150 random edits: each loads (then within the rules) or is one CaptureError line; nothing else escapes."""
+    refused = 0
+    for i in range(150):
+        cap = tmp_path / f"f{i}"
+        shutil.copytree(good, cap)
+        changes = {FUZZ_FIELDS[k]: _fuzz_value(rng) for k in rng.choice(len(FUZZ_FIELDS), rng.integers(1, 3))}
+        try:
+            _edit_toml(cap, **changes)
+        except (ValueError, TypeError, OverflowError):  # tomlkit cannot write it: not a TOML input
+            shutil.rmtree(cap)
+            continue
+        try:
+            loaded = load_capture(cap)
+        except CaptureError as e:
+            refused += 1
+            assert "\n" not in str(e) and not any(b in str(e) for b in BAD_TEXT), str(e)
+        else:  # accepted: then the rules hold for what was read
+            cfg = loaded.config
+            for field in ("rig.lamp", "rig.camera", "camera.look_at"):
+                section, name = field.split(".")
+                check = getattr(getattr(cfg, section), name)
+                assert all(not isinstance(v, bool) and np.isfinite(v) for v in check), (changes, check)
+                assert np.linalg.norm(check) <= 1e5, (changes, check)
+            assert all(0 < v <= 1 for v in cfg.rho_standard), changes
+        shutil.rmtree(cap)
+    assert refused > 75  # most random edits are wrong, and each was refused by name
