@@ -598,3 +598,9 @@ def test_seeded_fuzz_of_capture_toml_never_escapes_the_rules(good, tmp_path, rng
             assert all(0 < v <= 1 for v in cfg.rho_standard), changes
         shutil.rmtree(cap)
     assert refused > 75  # most random edits are wrong, and each was refused by name
+
+
+def test_too_many_pixels_echoes_the_size_as_typed(tmp_path, texture_model):
+    argv = ["texture", "synthesize", str(texture_model), "--size", "40000x20000", "-o", str(tmp_path / "s.tif")]
+    line = _refused(argv, "--size 40000x20000", unwritten=[tmp_path / "s.tif"])
+    assert "(20000, 40000)" not in line and "800000000 pixels" in line

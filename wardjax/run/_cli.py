@@ -510,8 +510,8 @@ def texture_synthesize(model_path: Path, size: str, seed: int, iterations: int, 
                 model, shape, seed=seed, iterations=iterations, progress=lambda k, n: bar.update(task, completed=k)
             )
         write_texture_image(out_path, result.image)
-    except (ValueError, OSError) as e:
-        _fail(str(e).splitlines()[0])
+    except (ValueError, OSError) as e:  # the library speaks of shape=(height, width); the user typed --size WxH
+        _fail(str(e).splitlines()[0].replace(f"shape={shape!r}", f"--size {size}"))
     dist = " ".join(f"{d:.3f}" for d in result.distance)
     console.print(
         f"subband KS distance: start {result.initial_distance:.3f}, per iteration {dist}",
