@@ -604,3 +604,14 @@ def test_too_many_pixels_echoes_the_size_as_typed(tmp_path, texture_model):
     argv = ["texture", "synthesize", str(texture_model), "--size", "40000x20000", "-o", str(tmp_path / "s.tif")]
     line = _refused(argv, "--size 40000x20000", unwritten=[tmp_path / "s.tif"])
     assert "(20000, 40000)" not in line and "800000000 pixels" in line
+
+
+def test_a_full_disk_is_refused_before_any_work(good, tmp_path, monkeypatch):
+    import collections
+
+    import wardjax._files
+
+    usage = collections.namedtuple("usage", "total used free")
+    monkeypatch.setattr(wardjax._files.shutil, "disk_usage", lambda p: usage(10 << 30, 10 << 30, 4096))
+    out = tmp_path / "out"
+    _refused(["fit", str(good), "--out", str(out), "--quiet"], str(out), contains="the disk is full", unwritten=[out])
