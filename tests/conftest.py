@@ -19,7 +19,13 @@ jax.config.update("jax_numpy_rank_promotion", "raise")
 jax.config.update("jax_numpy_dtype_promotion", "strict")
 
 with install_import_hook("wardjax", "_typecheck.typecheck"):
-    import wardjax  # noqa: F401  (imported here, through the hook, before any test imports it)
+    import wardjax
+    import wardjax.run
+
+    # The package imports its names on first use; import them all here, through the hook, before any test does.
+    for _package in (wardjax, wardjax.run):
+        for _name in _package.__all__:
+            getattr(_package, _name)
 # The CLI keeps compiled kernels on disk (a process-wide JAX setting); tests
 # run it in-process, so they leave it off unless a test turns it on itself
 # (tests/test_cli_fit.py checks the cache in a subprocess).

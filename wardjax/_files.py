@@ -21,6 +21,7 @@ import hashlib
 import json
 import math
 import os
+import shutil
 import tempfile
 from collections.abc import Iterator
 from pathlib import Path
@@ -32,11 +33,15 @@ __all__ = [
     "ENCODINGS",
     "RAW_SUFFIXES",
     "atomic_path",
+    "check_writable_dir",
+    "check_writable_file",
+    "commit_folder",
     "decode_image",
     "decode_lut",
     "decode_values",
     "encode_image",
     "encode_values",
+    "as_rgb",
     "jsonable",
     "read_image",
     "remove_temporaries",
@@ -88,6 +93,64 @@ def remove_temporaries(folder) -> None:
     if folder.is_dir():
         for tmp in folder.glob(f".*{_TMP_SUFFIX}"):
             tmp.unlink(missing_ok=True)
+
+
+def _writable_folder_reason(folder: Path) -> str | None:
+    """Why files cannot be created in ``folder`` (made if missing), or ``None``: the first existing ancestor decides."""
+    probe = folder
+    while not probe.exists():
+        if probe.parent == probe:
+            return "no existing parent folder"
+        probe = probe.parent
+    if not probe.is_dir():
+        return f"{probe} is a file, not a folder" if probe != folder else "is a file, not a folder"
+    if not os.access(probe, os.W_OK | os.X_OK):
+        return f"{probe} is not writable" if probe != folder else "the folder is not writable"
+    return None
+
+
+def check_writable_dir(path) -> None:
+    """Raise ``ValueError`` (one line naming ``path`` and the reason) if files cannot be written under folder ``path``.
+
+    Checked before any long computation: a parent that is a file, a read-only
+    folder, a full disk (less than 1 MiB free).
+    """
+    path = Path(path)
+    reason = _writable_folder_reason(path)
+    if reason is None:
+        probe = path
+        while not probe.exists():
+            probe = probe.parent
+        if shutil.disk_usage(probe).free < 1 << 20:
+            reason = "the disk is full"
+    if reason is not None:
+        raise ValueError(f"{path}: cannot write here: {reason}")
+
+
+def check_writable_file(path) -> None:
+    """Raise ``ValueError`` naming ``path`` if it cannot be written: a folder, or a folder that cannot hold it."""
+    path = Path(path)
+    if path.is_dir():
+        raise ValueError(f"{path}: cannot write here: is a folder, expected a file name")
+    try:
+        check_writable_dir(path.parent)
+    except ValueError as e:
+        raise ValueError(f"{path}: cannot write here: {str(e).split(': cannot write here: ', 1)[1]}") from None
+
+
+def commit_folder(staging, dest, *, last: str) -> None:
+    """Move the files of the flat folder ``staging`` into ``dest`` (made if missing), ``last`` last; drop ``staging``.
+
+    A batch writes a capture's outputs into a staging folder and commits them
+    only once all are written, so that a fit failing mid-way leaves ``dest``
+    as it was; ``last`` (``params.json``) marks the capture finished.
+    """
+    staging, dest = Path(staging), Path(dest)
+    dest.mkdir(parents=True, exist_ok=True)
+    names = sorted(p.name for p in staging.iterdir() if p.is_file())
+    for name in sorted(names, key=lambda n: n == last):
+        os.replace(staging / name, dest / name)
+    shutil.rmtree(staging)
 
 
 def write_bytes_atomic(path, data: bytes | bytearray) -> None:
@@ -191,10 +254,11 @@ def srgb8(linear) -> np.ndarray:
 # --------------------------------------------------------------------------- image files
 
 
-def read_image(path) -> np.ndarray:
+def read_image(path, *, rgb: bool = True) -> np.ndarray:
     """Read an image file as stored: ``(H, W, 3)`` uint8/uint16 (raw files: linear uint16).
 
-    Grey images are repeated over RGB; an alpha channel is dropped. Raises
+    Grey images are repeated over RGB and an alpha channel is dropped (see
+    :func:`as_rgb`); ``rgb=False`` returns the channels as stored. Raises
     ``OSError``/``ValueError`` from the readers on unreadable files.
     """
     path = Path(path)
@@ -219,6 +283,13 @@ def read_image(path) -> np.ndarray:
 
         img = iio.imread(path)
     img = np.asarray(img)
+    return as_rgb(img) if rgb else img
+
+
+def as_rgb(img: np.ndarray) -> np.ndarray:
+    """An image as read, made ``(H, W, 3)``: grey repeated over RGB, alpha dropped (``ValueError`` otherwise)."""
+    if img.ndim == 3 and img.shape[-1] == 1:
+        img = img[..., 0]
     if img.ndim == 2:
         img = np.repeat(img[..., None], 3, axis=-1)
     if img.ndim != 3 or img.shape[-1] not in (3, 4):

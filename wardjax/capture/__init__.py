@@ -14,6 +14,15 @@ from ._setup import load_display as load_display
 from ._setup import load_viewing as load_viewing
 from ._smartphone import SmartphoneCapture as SmartphoneCapture
 from ._smartphone import SmartphoneCaptureFile as SmartphoneCaptureFile
+from ._rules import MAX_CLIPPED_FRACTION as MAX_CLIPPED_FRACTION
+from ._rules import RuleError as RuleError
+from ._rules import check_focal_px as check_focal_px
+from ._rules import check_image_pair as check_image_pair
+from ._rules import check_lit_exposure as check_lit_exposure
+from ._rules import check_photo_region as check_photo_region
+from ._rules import check_position as check_position
+from ._rules import check_rho_d_map as check_rho_d_map
+from ._rules import check_ward_params as check_ward_params
 
 __all__ = [
     "CAPTURE_FILE",
@@ -30,4 +39,13 @@ __all__ = [
     "load_viewing",
     "SmartphoneCapture",
     "SmartphoneCaptureFile",
+    "MAX_CLIPPED_FRACTION",
+    "RuleError",
+    "check_focal_px",
+    "check_image_pair",
+    "check_lit_exposure",
+    "check_photo_region",
+    "check_position",
+    "check_rho_d_map",
+    "check_ward_params",
 ]

@@ -47,7 +47,14 @@ def pydantic_error(err: pydantic.ValidationError, file: str) -> CaptureError:
         return CaptureError(file, field, "required field is missing")
     if first["type"] == "extra_forbidden":
         return CaptureError(file, field, "unknown field (check its spelling and section)")
+    # pydantic prefixes the messages of custom validators with "Value error, " / "Assertion failed, ".
+    for prefix in ("Value error, ", "Assertion failed, "):
+        msg = msg.removeprefix(prefix)
     got = first.get("input")
+    if first["type"] in ("float_type", "int_type") and isinstance(got, bool):
+        return CaptureError(file, field, f"expected a number, not the boolean {str(got).lower()}")
     more = len(err.errors()) - 1
     tail = f" (and {more} more problem{'s' if more > 1 else ''})" if more else ""
-    return CaptureError(file, field, f"{msg}, got {got!r}{tail}")
+    # A whole section as the input (a check across its fields) says nothing the message does not.
+    shown = "" if isinstance(got, dict) else f", got {got!r}"
+    return CaptureError(file, field, f"{msg}{shown}{tail}")

@@ -7,9 +7,10 @@ from pathlib import Path
 
 import numpy as np
 
-from .._files import RAW_SUFFIXES, decode_lut, read_image, sha256
+from .._files import RAW_SUFFIXES, as_rgb, decode_lut, read_image, sha256
 from ..geometry import Camera, Rig
 from ._errors import CAPTURE_FILE, CaptureError
+from ._rules import RuleError, check_image_pair, check_lit_exposure
 from ._schema import CaptureFile, parse_capture_file
 from ._smartphone import SmartphoneCapture, load_smartphone_capture
 
@@ -71,6 +72,8 @@ def _load_image(folder: Path, name: str, field: str, cfg: CaptureFile):
     path = folder / name
     if Path(name).is_absolute() or ".." in Path(name).parts:
         raise CaptureError(CAPTURE_FILE, field, f"image path {name!r} must be relative to the capture folder")
+    if path.is_dir():
+        raise CaptureError(name, None, f"is a folder, expected an image file (named by {CAPTURE_FILE} {field})")
     if not path.is_file():
         raise CaptureError(name, None, f"image file is missing (named by {CAPTURE_FILE} {field})")
     suffix = path.suffix.lower()
@@ -89,7 +92,10 @@ def _load_image(folder: Path, name: str, field: str, cfg: CaptureFile):
     if suffix in (".jpg", ".jpeg") and bits != 8:
         raise CaptureError(CAPTURE_FILE, "images.bit_depth", f"JPEG {name} is 8-bit, got bit_depth = {bits}")
     try:
-        codes = read_image(path)
+        stored = read_image(path, rgb=False)
+        channels = 1 if stored.ndim == 2 else int(stored.shape[-1])
+        codes = as_rgb(stored)
+        del stored
     except Exception as e:  # any reader failure is a corrupt file to the user
         reason = str(e).splitlines()[0] if str(e) else type(e).__name__
         raise CaptureError(name, None, f"cannot read the image ({reason[:160]})") from None
@@ -105,7 +111,7 @@ def _load_image(folder: Path, name: str, field: str, cfg: CaptureFile):
         raise CaptureError(
             name, None, f"is {codes.shape[1]}×{codes.shape[0]} pixels but {CAPTURE_FILE} camera.image_size = [{w}, {h}]"
         )
-    return codes, sha256(path)
+    return codes, sha256(path), channels
 
 
 def load_capture(path) -> Capture | SmartphoneCapture:
@@ -133,20 +139,30 @@ def load_capture(path) -> Capture | SmartphoneCapture:
     if cfg.method == "smartphone":
         return load_smartphone_capture(folder, cfg)
     checksums = {CAPTURE_FILE: sha256(folder / CAPTURE_FILE)}
-    lit_codes, checksums[cfg.images.lit] = _load_image(folder, cfg.images.lit, "images.lit", cfg)
+    lit_codes, checksums[cfg.images.lit], lit_ch = _load_image(folder, cfg.images.lit, "images.lit", cfg)
     enc, bits = cfg.images.encoding, cfg.images.bit_depth
     top = (1 << bits) - 1
     lut = decode_lut(enc, bits)
     lit = lut[lit_codes]
     clipped = lit_codes == top
-    del lit_codes
-    dark = None
-    if cfg.images.dark is not None:
-        dark_codes, checksums[cfg.images.dark] = _load_image(folder, cfg.images.dark, "images.dark", cfg)
-        dark = lut[dark_codes]
-        del dark_codes
     if clipped.all():
         raise CaptureError(cfg.images.lit, None, "every pixel is saturated (at the largest code); reduce the exposure")
+    try:
+        check_lit_exposure(cfg.images.lit, lit_codes, float(lit.max()), cfg.fit.noise_floor)
+    except RuleError as e:
+        raise CaptureError(e.field, None, e.message) from None
+    dark = None
+    if cfg.images.dark is not None:
+        dark_codes, checksums[cfg.images.dark], dark_ch = _load_image(folder, cfg.images.dark, "images.dark", cfg)
+        try:
+            check_image_pair(
+                cfg.images.lit, (*lit_codes.shape[:2], lit_ch), cfg.images.dark, (*dark_codes.shape[:2], dark_ch)
+            )
+        except RuleError as e:
+            raise CaptureError(e.field, None, e.message) from None
+        dark = lut[dark_codes]
+        del dark_codes
+    del lit_codes
     saturation = float(0.5 * (lut[top] + lut[top - 1]))
     cam = Camera(
         position=cfg.rig.camera,

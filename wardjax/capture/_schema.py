@@ -59,9 +59,10 @@ from typing import Annotated, Any, Literal
 
 import numpy as np
 import pydantic
-from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, FiniteFloat
+from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, Strict
 
 from ._errors import CAPTURE_FILE, CaptureError, pydantic_error
+from ._rules import RuleError, check_focal_px, check_position
 from ._smartphone import SmartphoneCaptureFile, parse_smartphone_file
 
 __all__ = ["CaptureFile", "parse_capture_file"]
@@ -70,17 +71,20 @@ __all__ = ["CaptureFile", "parse_capture_file"]
 LAMP_X_TOLERANCE = 1.0
 
 
-Finite = FiniteFloat
-Positive = Annotated[FiniteFloat, Field(gt=0)]
-NonNegative = Annotated[FiniteFloat, Field(ge=0)]
+# Strict: a TOML boolean is not a number (lax pydantic would read ``true`` as 1.0); integers are accepted.
+Finite = Annotated[float, Strict(), Field(allow_inf_nan=False)]
+Positive = Annotated[Finite, Field(gt=0)]
+NonNegative = Annotated[Finite, Field(ge=0)]
+PixelCount = Annotated[int, Strict(), Field(gt=1)]
 Vec3 = tuple[Finite, Finite, Finite]
 Vec2 = tuple[Finite, Finite]
 Box = tuple[Finite, Finite, Finite, Finite]
-Reflectance = Annotated[FiniteFloat, Field(gt=0, le=1)]
+Reflectance = Annotated[Finite, Field(gt=0, le=1)]
 
 
 def _scalar_to_rgb(x: Any) -> Any:
-    if isinstance(x, (int, float)) and not isinstance(x, bool):
+    # A boolean is spread too, so that each channel refuses it as "not a number" (strict floats).
+    if isinstance(x, (int, float)):
         return (x, x, x)
     return x
 
@@ -113,7 +117,7 @@ class CameraSection(_Section):
     focal_px: Positive
     focal_px_y: Positive | None = None
     principal_point: Vec2 | None = None
-    image_size: tuple[Annotated[int, Field(gt=1)], Annotated[int, Field(gt=1)]]
+    image_size: tuple[PixelCount, PixelCount]
 
 
 class RegionsSection(_Section):
@@ -159,6 +163,15 @@ class CaptureFile(_Section):
 def _check_physics(cfg: CaptureFile) -> None:
     """Checks across fields that pydantic's per-field validation cannot make."""
     f = CAPTURE_FILE
+    try:
+        check_position("rig.lamp", cfg.rig.lamp)
+        check_position("rig.camera", cfg.rig.camera)
+        check_position("camera.look_at", cfg.camera.look_at)
+        check_focal_px("camera.focal_px", cfg.camera.focal_px, cfg.camera.image_size[0])
+        if cfg.camera.focal_px_y is not None:
+            check_focal_px("camera.focal_px_y", cfg.camera.focal_px_y, cfg.camera.image_size[1])
+    except RuleError as e:
+        raise CaptureError(f, e.field, e.message) from None
     lamp, cam = np.array(cfg.rig.lamp), np.array(cfg.rig.camera)
     if lamp[2] <= 0:
         raise CaptureError(f, "rig.lamp", f"the lamp must be above the sample plane (z > 0), got z = {lamp[2]}")
@@ -201,6 +214,8 @@ def _check_physics(cfg: CaptureFile) -> None:
 def parse_capture_file(path: Path) -> CaptureFile | SmartphoneCaptureFile:
     """Read and validate ``capture.toml`` (raises :class:`CaptureError`)."""
     f = CAPTURE_FILE
+    if path.is_dir():
+        raise CaptureError(f, None, f"is a folder in {path.parent}, expected the capture's TOML file")
     if not path.is_file():
         raise CaptureError(f, None, f"missing: no {CAPTURE_FILE} in {path.parent}")
     try:

@@ -47,10 +47,11 @@ from typing import Annotated, Literal
 
 import numpy as np
 import pydantic
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, ConfigDict, Field, Strict
 
 from .._files import read_image, sha256
 from ._errors import CAPTURE_FILE, CaptureError, pydantic_error
+from ._rules import RuleError, check_photo_region
 from ._setup import load_display, load_viewing
 
 __all__ = ["SmartphoneCapture", "SmartphoneCaptureFile", "load_smartphone_capture", "parse_smartphone_file"]
@@ -60,20 +61,20 @@ class _Section(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True)
 
 
+# Strict: a TOML boolean is not a number (lax pydantic would read ``true`` as 1); integers pass as floats.
+_Float = Annotated[float, Strict(), Field(allow_inf_nan=False)]
+_Pixel = Annotated[int, Strict(), Field(ge=0)]
+
+
 class PhotoSection(_Section):
     file: str = Field(min_length=1)
-    region: tuple[
-        Annotated[int, Field(ge=0)],
-        Annotated[int, Field(ge=0)],
-        Annotated[int, Field(ge=0)],
-        Annotated[int, Field(ge=0)],
-    ]
+    region: tuple[_Pixel, _Pixel, _Pixel, _Pixel]
     decoding: Literal["gamma2.2", "srgb"] = "gamma2.2"
 
 
 class ThresholdsSection(_Section):
     ppb: list[Annotated[int, Field(ge=1, strict=True)]] | None = Field(default=None, min_length=1)
-    ppb_mean: Annotated[float, Field(gt=0, allow_inf_nan=False)] | None = None
+    ppb_mean: Annotated[_Float, Field(gt=0)] | None = None
     n_observers: Annotated[int, Field(ge=1, strict=True)] | None = None
 
     @pydantic.model_validator(mode="after")
@@ -93,12 +94,12 @@ class SetupSection(_Section):
 
 
 class SpecularSection(_Section):
-    n: Annotated[float, Field(gt=1.0, lt=4.0, allow_inf_nan=False)] = 1.5
-    n_range: tuple[Annotated[float, Field(gt=1.0, lt=4.0)], Annotated[float, Field(gt=1.0, lt=4.0)]] = (1.4, 1.7)
+    n: Annotated[_Float, Field(gt=1.0, lt=4.0)] = 1.5
+    n_range: tuple[Annotated[_Float, Field(gt=1.0, lt=4.0)], Annotated[_Float, Field(gt=1.0, lt=4.0)]] = (1.4, 1.7)
 
 
 class SmartphoneFitSection(_Section):
-    seed: int = 0
+    seed: Annotated[int, Strict()] = 0
 
 
 class SmartphoneCaptureFile(_Section):
@@ -156,6 +157,8 @@ def parse_smartphone_file(raw: dict, file: str) -> SmartphoneCaptureFile:
 def load_smartphone_capture(folder: Path, cfg: SmartphoneCaptureFile) -> SmartphoneCapture:
     """Load a smartphone capture folder whose ``capture.toml`` validated to ``cfg``."""
     path = folder / cfg.photo.file
+    if path.is_dir():
+        raise CaptureError(CAPTURE_FILE, "photo.file", f"{cfg.photo.file!r} is a folder, expected an image file")
     if not path.is_file():
         raise CaptureError(CAPTURE_FILE, "photo.file", f"{cfg.photo.file!r} does not exist in {folder}")
     try:
@@ -175,5 +178,10 @@ def load_smartphone_capture(folder: Path, cfg: SmartphoneCaptureFile) -> Smartph
         raise CaptureError(
             CAPTURE_FILE, "photo.region", f"{list(cfg.photo.region)} reaches outside the {w}×{h} photo {cfg.photo.file}"
         )
+    if np.issubdtype(photo.dtype, np.integer):
+        try:
+            check_photo_region(cfg.photo.file, photo[y0:y1, x0:x1], float(np.iinfo(photo.dtype).max))
+        except RuleError as e:
+            raise CaptureError(e.field, "photo.region", e.message) from None
     checksums = {CAPTURE_FILE: sha256(folder / CAPTURE_FILE), cfg.photo.file: sha256(path)}
     return SmartphoneCapture(folder, cfg.name or folder.resolve().name, cfg, photo, checksums)

@@ -3,13 +3,17 @@
 :func:`run_batch` takes capture folders and folders of capture folders. For
 each capture it loads, fits and writes ``OUT/<name>/`` (see
 :func:`wardjax.export.write_capture_outputs`). A capture that fails is
-recorded in ``summary.csv`` with its one-line error and the batch goes on.
+recorded in ``summary.csv`` with its one-line error and the batch goes on;
+a failure the code did not foresee (not a ``ValueError``) keeps its traceback
+in ``OUT/errors.log``.
 
 Restartable: every file is written atomically and ``params.json`` is written
 last, so a capture is finished exactly when its ``params.json`` exists and
 records the checksums of the current inputs. A rerun skips finished captures
 (unless ``force``), removes temporary files a killed run left behind and
-redoes the rest; its outputs are identical to those of an uninterrupted run,
+redoes the rest (a capture's outputs are written into a hidden staging
+folder and moved into place only when all are written, so a fit that fails
+mid-way writes nothing for that capture); its outputs are identical to those of an uninterrupted run,
 the ``created`` timestamp aside. ``summary.csv`` is rebuilt from the
 ``params.json`` files, so it does not depend on which run made them.
 """
@@ -21,10 +25,12 @@ import dataclasses
 import datetime
 import io
 import json
+import shutil
+import traceback
 from collections.abc import Callable
 from pathlib import Path
 
-from .._files import remove_temporaries, sha256, write_bytes_atomic
+from .._files import commit_folder, remove_temporaries, sha256, write_bytes_atomic
 from ..capture import CAPTURE_FILE, CaptureError, load_capture
 from ..export import write_capture_outputs
 from ._fit_capture import fit_capture
@@ -88,7 +94,7 @@ def find_captures(paths) -> list[Path]:
     """
     found: list[Path] = []
     for p in map(Path, paths):
-        if (p / CAPTURE_FILE).is_file() or not p.is_dir():
+        if (p / CAPTURE_FILE).exists() or not p.is_dir():  # a capture, even if its capture.toml is broken
             found.append(p)
             continue
         subs = sorted(d for d in p.iterdir() if d.is_dir() and not d.name.startswith("."))
@@ -149,6 +155,25 @@ def _row(item: BatchItem) -> dict:
     return row
 
 
+def scanline_note(doc: dict | None) -> str | None:
+    """One line on the scanlines of a finished fit that stopped at the step limit, or ``None`` if none did.
+
+    Such a scanline's parameters are the best point found, not certified
+    (:class:`~wardjax.Status` ``MAX_STEPS``); the count is in ``params.json``
+    ``fit.diagnostics.scanlines.status`` and is said, never left silent.
+    """
+    if not doc:
+        return None
+    scan = doc.get("fit", {}).get("diagnostics", {}).get("scanlines", {})
+    stopped, total = int(scan.get("status", {}).get("max_steps", 0)), int(scan.get("count", 0))
+    if stopped == 0:
+        return None
+    return (
+        f"{stopped} of {total} scanlines stopped at the step limit (status max_steps): their parameters are the "
+        f"best point found, not certified; the joint fit is {doc['fit'].get('status', '?')}"
+    )
+
+
 def _num(x) -> str:
     return "" if x is None else f"{float(x):.6g}"
 
@@ -163,11 +188,19 @@ def write_summary(path: Path, items: list[BatchItem]) -> None:
     write_bytes_atomic(path, buf.getvalue().encode())
 
 
-def _one_line(e: BaseException) -> str:
-    if isinstance(e, CaptureError):
-        return str(e)
+# Tracebacks of the failures the code did not foresee, one file per batch output folder.
+ERROR_LOG = "errors.log"
+
+
+def _one_line(e: BaseException, log: Path | None = None) -> str:
+    """The error as the user reads it: foreseen errors (``ValueError``: a capture, a rule) as they are;
+    anything else as its type and first line, pointing at ``log`` where its traceback is kept."""
     text = str(e).strip().splitlines()
-    return f"internal error: {type(e).__name__}: {text[0] if text else ''}"
+    first = text[0] if text else ""
+    if isinstance(e, ValueError) and first:
+        return first
+    where = f"; traceback in {log}" if log is not None else ""
+    return f"unexpected failure ({type(e).__name__}{': ' + first if first else ''}){where}"
 
 
 def run_batch(
@@ -203,11 +236,14 @@ def run_batch(
     names = _names(captures)
     created = datetime.datetime.now(datetime.UTC).replace(microsecond=0).isoformat().replace("+00:00", "Z")
     items: list[BatchItem] = []
+    log: list[str] = []
     for i, (src, name) in enumerate(zip(captures, names)):
         if on_start:
             on_start(i, len(captures), name)
         out_dir = out / name
+        staging = out / f".{name}.partial"  # a capture's outputs, committed once all are written
         remove_temporaries(out_dir)
+        shutil.rmtree(staging, ignore_errors=True)  # what a killed run left behind
         doc = None if force else _finished(src, out_dir)
         if doc is not None:
             item = BatchItem(src, name, "ok", skipped=True, params=doc)
@@ -217,10 +253,15 @@ def run_batch(
                 fitter = FITTERS.get(cap.method)
                 if fitter is None:
                     raise CaptureError(CAPTURE_FILE, "method", f"no fitter for method {cap.method!r}")
-                doc = fitter(cap, out_dir, created=created)
+                doc = fitter(cap, staging, created=created)
+                commit_folder(staging, out_dir, last="params.json")
                 item = BatchItem(src, name, "ok", params=doc)
-            except Exception as e:  # a bad capture must not sink the batch
-                item = BatchItem(src, name, "error", error=_one_line(e))
+            except Exception as e:  # a bad capture must not sink the batch, nor leave half its outputs
+                shutil.rmtree(staging, ignore_errors=True)
+                if _one_line(e).startswith("unexpected failure"):
+                    log.append(f"{name} ({src}):\n{''.join(traceback.format_exception(e))}")
+                    write_bytes_atomic(out / ERROR_LOG, "\n".join(log).encode())
+                item = BatchItem(src, name, "error", error=_one_line(e, out / ERROR_LOG))
         items.append(item)
         write_summary(out / "summary.csv", items)
         if progress:

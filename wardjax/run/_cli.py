@@ -18,8 +18,64 @@ __all__ = ["main"]
 
 console = Console()
 
+# Where the traceback of a failure the code did not foresee is kept (the user sees one line naming it).
+ERROR_LOG_NAME = "error.log"
 
-@click.group(context_settings={"help_option_names": ["-h", "--help"]})
+
+class _Group(click.Group):
+    """The ``wardjax`` group: every refusal one line on stderr, never a usage block or a traceback.
+
+    Click's usage errors (a bad option value, an unknown command) become one
+    ``error: …`` line with the command's help hint on it; a failure the code
+    did not foresee is written with its traceback to :func:`_error_log_path`
+    and reported as one line naming that file.
+    """
+
+    def main(self, args=None, prog_name=None, complete_var=None, standalone_mode=True, **extra):  # type: ignore[override]
+        if not standalone_mode:
+            return super().main(args, prog_name, complete_var, standalone_mode=False, **extra)
+        try:
+            rv = super().main(args, prog_name, complete_var, standalone_mode=False, **extra)
+        except click.ClickException as e:
+            hint = ""
+            if isinstance(e, click.UsageError) and e.ctx is not None:
+                hint = f" (see '{e.ctx.command_path} -h')"
+            _fail(e.format_message() + hint, code=e.exit_code)
+        except click.Abort:
+            _fail("aborted", code=1)
+        except Exception as e:  # the unforeseen: one line for the user, the traceback in a file
+            _fail_unexpected(e)
+        sys.exit(rv if isinstance(rv, int) else 0)
+
+
+def _error_log_path() -> Path:
+    import platformdirs
+
+    return Path(platformdirs.user_log_dir("wardjax")) / ERROR_LOG_NAME
+
+
+def _fail_unexpected(exc: BaseException) -> None:
+    """Log ``exc`` with its traceback to :func:`_error_log_path` and exit with one line pointing at it."""
+    import tempfile
+    import traceback
+
+    text = "".join(traceback.format_exception(exc)).encode()
+    where = None
+    for path in (_error_log_path(), Path(tempfile.gettempdir()) / f"wardjax-{ERROR_LOG_NAME}"):
+        try:
+            from .._files import write_bytes_atomic
+
+            write_bytes_atomic(path, text)
+            where = path
+            break
+        except OSError:
+            continue
+    first = (str(exc).strip().splitlines() or [""])[0]
+    kept = f"; traceback in {where}" if where else ""
+    _fail(f"unexpected failure ({type(exc).__name__}{': ' + first if first else ''}){kept}", code=1)
+
+
+@click.group(cls=_Group, context_settings={"help_option_names": ["-h", "--help"]})
 @click.version_option(package_name="wardjax")
 @click.option(
     "--cache-dir",
@@ -49,7 +105,8 @@ def _enable_compile_cache(cache_dir: Path | None) -> None:
     cache makes that a one-time cost per machine and shape. Set here, in the
     command (the process is ours), never on import of the library.
     """
-    import jax
+    import os
+
     import platformdirs
 
     path = Path(cache_dir) if cache_dir else Path(platformdirs.user_cache_dir("wardjax")) / "xla"
@@ -57,19 +114,53 @@ def _enable_compile_cache(cache_dir: Path | None) -> None:
         path.mkdir(parents=True, exist_ok=True)
     except OSError:
         return  # a read-only home: run without the cache rather than fail
+    if "jax" not in sys.modules:  # JAX reads these when it is imported: a command that never needs it never pays for it
+        os.environ["JAX_COMPILATION_CACHE_DIR"] = str(path)
+        os.environ["JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS"] = "0"
+        return
+    import jax
+
     jax.config.update("jax_compilation_cache_dir", str(path))
     jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
 
 
-def _fail(message: str) -> None:
-    """Print one unwrapped ``error: …`` line on stderr and exit with status 2.
+def _fail(message: str, code: int = 2) -> None:
+    """Print one unwrapped ``error: …`` line on stderr and exit with status ``code`` (2: bad input).
 
     ``soft_wrap`` keeps a long message (a deep path) on one line, and the
     message is escaped so that text like ``[y0, y1, x0, x1]`` is not read as
     rich markup.
     """
     Console(stderr=True, soft_wrap=True).print(f"[bold red]error:[/] {escape(message)}", highlight=False)
-    sys.exit(2)
+    sys.exit(code)
+
+
+def _check_out_dir(path: Path) -> None:
+    """Refuse, before any computation, an output folder that cannot be written (one line, exit 2)."""
+    from .._files import check_writable_dir
+
+    try:
+        check_writable_dir(path)
+    except ValueError as e:
+        _fail(str(e))
+
+
+def _check_out_file(path: Path) -> None:
+    """Refuse, before any computation, an output file that cannot be written (one line, exit 2)."""
+    from .._files import check_writable_file
+
+    try:
+        check_writable_file(path)
+    except ValueError as e:
+        _fail(str(e))
+
+
+def _pm(value: float | None, err: float | None) -> str:
+    """``value ± err``; an error that rounds to zero at 4 decimals is printed in scientific notation."""
+    if value is None or err is None:
+        return "–"
+    e = f"{err:.4f}" if abs(err) >= 5e-5 else f"{err:.1e}"
+    return f"{value:.4f} ± {e}"
 
 
 # --------------------------------------------------------------------------- demo
@@ -120,6 +211,7 @@ def demo(out_dir: Path, seed: int) -> None:
 @click.option("--orientation", type=click.Choice(["vertical", "horizontal"]), default="vertical", show_default=True)
 def gratings(display_name: str, viewing_name: str, out_dir: Path, orientation: str) -> None:
     """Write the square-wave grating PNGs (1 PNG per whole PPB) to load onto the phone."""
+    _check_out_dir(out_dir)
     from ..smartphone import write_gratings
 
     try:
@@ -155,13 +247,13 @@ def fit_cmd(paths: tuple[Path, ...], out_dir: Path, force: bool, quiet: bool) ->
     """
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
-    from ._batch import run_batch
+    from ._batch import run_batch, scanline_note
 
     err = Console(stderr=True)
     missing = [str(p) for p in paths if not p.exists()]
     if missing:
-        err.print(f"[bold red]error:[/] {missing[0]}: no such capture folder", highlight=False, soft_wrap=True)
-        sys.exit(2)
+        _fail(f"{missing[0]}: no such capture folder")
+    _check_out_dir(out_dir)
     with Progress(
         TextColumn("{task.description}"),
         BarColumn(),
@@ -178,8 +270,10 @@ def fit_cmd(paths: tuple[Path, ...], out_dir: Path, force: bool, quiet: bool) ->
 
         def progress(i, n, item):
             bar.update(task, completed=i + 1)
-            if item.status == "error":
-                err.print(f"[bold red]error:[/] {item.name}: {item.error}", highlight=False, soft_wrap=True)
+            if item.status == "error":  # the capture named once: by its output name, unless the error names its path
+                named = item.error.startswith(str(item.source))
+                text = item.error if named else f"{item.name}: {item.error}"
+                err.print(f"[bold red]error:[/] {escape(text)}", highlight=False, soft_wrap=True)
 
         items = run_batch(paths, out_dir, force=force, progress=progress, on_start=on_start)
     if not quiet:
@@ -191,7 +285,7 @@ def fit_cmd(paths: tuple[Path, ...], out_dir: Path, force: bool, quiet: bool) ->
         for it in items:
             if it.params:
                 p, e = it.params["params"], it.params["stderr"]
-                pm = lambda k: f"{p[k]:.4f} ± {e[k]:.4f}" if p[k] is not None and e[k] is not None else "–"
+                pm = lambda k: _pm(p[k], e[k])
                 rc = it.params["fit"].get("reduced_chi2")  # none for the smartphone method
                 t.add_row(
                     it.name,
@@ -204,6 +298,9 @@ def fit_cmd(paths: tuple[Path, ...], out_dir: Path, force: bool, quiet: bool) ->
             else:
                 t.add_row(it.name, "[red]error[/]", "", "", "", "")
         console.print(t)
+        for it in items:  # limits that were hit are said, not left in params.json alone
+            if note := scanline_note(it.params):
+                console.print(f"note: {it.name}: {note}", highlight=False, soft_wrap=True)
     if any(it.status == "error" for it in items):
         sys.exit(2)
 
@@ -240,13 +337,38 @@ def fit_cmd(paths: tuple[Path, ...], out_dir: Path, force: bool, quiet: bool) ->
     show_default=True,
     help="Who draws the images: wardjax's forward model, or Radiance (rtrace) from the exported material.",
 )
+@click.option("--force", is_flag=True, help="Replace the files of an existing capture in OUT_DIR.")
 def simulate_cmd(
-    out_dir, material, rho_d, rho_s, alpha_x, alpha_y, texture, encoding, bit_depth, image_format, size, seed, renderer
+    out_dir,
+    material,
+    rho_d,
+    rho_s,
+    alpha_x,
+    alpha_y,
+    texture,
+    encoding,
+    bit_depth,
+    image_format,
+    size,
+    seed,
+    renderer,
+    force,
 ) -> None:
     """Write a simulated capture folder (lit/dark images + capture.toml + truth) to OUT_DIR."""
     from .._data import table1_materials
-    from ..simulate import simulate_capture
+    from ..capture import CAPTURE_FILE, RuleError, check_ward_params
     from ..ward import WardParams
+
+    if not material:
+        try:  # the same rules as capture.toml and the Python API, named as the options are typed
+            check_ward_params(rho_d, rho_s, alpha_x, alpha_y)
+        except RuleError as e:
+            _fail(f"--{e.field.replace('_', '-')}: {e.message}")
+    if out_dir.is_dir() and not force and any(out_dir.iterdir()):
+        what = "holds a capture" if (out_dir / CAPTURE_FILE).exists() else "is not empty"
+        _fail(f"{out_dir}: {what}; choose another folder or add --force to replace its files")
+    _check_out_dir(out_dir)
+    from ..simulate import simulate_capture
 
     p = (
         table1_materials()[material]
@@ -265,7 +387,7 @@ def simulate_cmd(
             image_format=image_format,
             renderer=renderer,
         )
-    except ValueError as e:
+    except (ValueError, OSError) as e:
         _fail(str(e).splitlines()[0])
     console.print(
         f"wrote capture [bold]{cap.name}[/] ({cap.rig.camera.width}×{cap.rig.camera.height}, "
@@ -339,6 +461,11 @@ def texture_analyze(
     rho_d_path: Path, out_path: Path, region: str | None, height: int | None, quantiles: int, rho_s: float
 ) -> None:
     """Describe the ρd texture in RHO_D (a linear .tif/.npy, NaN = no data) by its subband histograms."""
+    if out_path.suffix.lower() not in (".json", ".npz"):
+        _fail(f"{out_path}: unknown texture file type {out_path.suffix!r}, expected .json or .npz")
+    if not 0 <= rho_s < 1:
+        _fail(f"--rho-s: must lie in [0, 1), got {rho_s}")
+    _check_out_file(out_path)
     from ..texture import analyze_texture, read_rho_d
 
     try:
@@ -346,7 +473,7 @@ def texture_analyze(
             read_rho_d(rho_d_path), region=_parse_region(region), height=height, n_quantiles=quantiles, rho_s=rho_s
         )
         model.save(out_path)
-    except ValueError as e:
+    except (ValueError, OSError) as e:
         _fail(str(e).splitlines()[0])
     console.print(f"analysed {model.describe_region()}", highlight=False, soft_wrap=True)
     console.print(
@@ -377,10 +504,20 @@ def texture_synthesize(model_path: Path, size: str, seed: int, iterations: int, 
     shape = _parse_size(size)
     if out_path.suffix.lower() not in (".tif", ".tiff", ".png"):
         _fail(f"{out_path}: unknown image type {out_path.suffix!r}, expected .tif, .tiff or .png")
+    _check_out_file(out_path)
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
     try:
         model = TextureModel.load(model_path)
+    except (ValueError, OSError) as e:
+        _fail(str(e).splitlines()[0])
+    need = 2 ** (model.height + 2)  # the smallest side the model's pyramid can be synthesised at
+    if min(shape) < need:
+        _fail(
+            f"--size {size}: each side must be at least {need} pixels for a texture analysed with "
+            f"{model.height} pyramid level(s) (analyse with fewer levels, --height, for smaller tiles)"
+        )
+    try:
         with Progress(
             TextColumn("synthesising"),
             BarColumn(),
@@ -394,8 +531,8 @@ def texture_synthesize(model_path: Path, size: str, seed: int, iterations: int, 
                 model, shape, seed=seed, iterations=iterations, progress=lambda k, n: bar.update(task, completed=k)
             )
         write_texture_image(out_path, result.image)
-    except ValueError as e:
-        _fail(str(e).splitlines()[0])
+    except (ValueError, OSError) as e:  # the library speaks of shape=(height, width); the user typed --size WxH
+        _fail(str(e).splitlines()[0].replace(f"shape={shape!r}", f"--size {size}"))
     dist = " ".join(f"{d:.3f}" for d in result.distance)
     console.print(
         f"subband KS distance: start {result.initial_distance:.3f}, per iteration {dist}",
@@ -438,6 +575,7 @@ def diagnose_cmd(capture: Path, out_dir: Path, max_steps: int, max_samples: int)
 
     if not capture.exists():
         _fail(f"{capture}: no such capture folder")
+    _check_out_dir(out_dir)
     try:
         cap = load_capture(capture)
         if not isinstance(cap, Capture):

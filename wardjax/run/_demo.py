@@ -24,7 +24,7 @@ from .._files import write_json_atomic
 from ..capture import CAPTURE_FILE
 from ..simulate import simulate_capture
 from ..texture import TextureModel, synthesize_texture, write_texture_image
-from ._batch import run_batch
+from ._batch import run_batch, scanline_note
 
 __all__ = ["run_capture_demo", "write_json_atomic"]
 
@@ -124,6 +124,9 @@ def run_capture_demo(out_dir, *, seed: int = 0, image_size=(480, 360), console: 
         )
         results[it.name] = doc
     console.print(table)
+    for name, doc in results.items():
+        if note := scanline_note(doc):
+            console.print(f"note: {name}: {note}", highlight=False, soft_wrap=True)
     console.print(
         f"Results in [bold]{out_dir / 'fits'}/[/] (per capture: params.json, rho_d.tif/.png, "
         "scanline.png, material.rad; summary.csv)."

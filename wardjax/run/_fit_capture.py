@@ -22,7 +22,7 @@ import numpy as np
 
 from .. import _shapes
 from .._status import Status
-from ..capture import CAPTURE_FILE, Capture, CaptureError
+from ..capture import CAPTURE_FILE, MAX_CLIPPED_FRACTION, Capture, CaptureError
 from ..export import RADIANCE_NORMALIZATION
 from ..fit import CombinedFit, ScanlineFit, fit_scanlines, texture_field_covariance, with_texture_errors
 from ..fit._texture_field import lobe
@@ -152,6 +152,11 @@ def fit_capture(cap: Capture, *, max_fit_samples: int = 50_000, band_rows: int =
             CAPTURE_FILE,
             "camera",
             "no pixel of the image sees the probe; check rig.camera, camera.look_at and regions.probe",
+        )
+    sat = float(np.mean(np.any(cap.lit_clipped, axis=-1)[probe]))
+    if sat > MAX_CLIPPED_FRACTION:
+        raise CaptureError(
+            lit_name, None, f"{sat:.0%} of the probe's pixels are saturated (at the largest code); reduce the exposure"
         )
     n_valid = int((probe & np.all(np.isfinite(f_r), axis=-1)).sum())
     counts = {name.lower(): int(np.sum(probe & ((flags & r) != 0))) for name, r in MaskReason.__members__.items()}

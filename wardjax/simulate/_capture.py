@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from .._files import encode_image, write_bytes_atomic, write_image, write_json_atomic
-from ..capture import CAPTURE_FILE, Capture, load_capture
+from ..capture import CAPTURE_FILE, Capture, check_ward_params, load_capture
 from ..export import RADIANCE_NORMALIZATION
 from ..geometry import Camera, Rig, project
 from ..ward import WardParams
@@ -120,7 +120,7 @@ def simulate_capture(
     ----------
     params
         The probe's :class:`WardParams` (unbatched). ρd is the mean diffuse
-        reflectance; the texture modulates it.
+        reflectance; the texture modulates it. Out of range: RuleError, nothing written.
     out
         The capture folder to write (created; existing files are replaced).
     seed
@@ -162,7 +162,7 @@ def simulate_capture(
         The folder, loaded with :func:`wardjax.load_capture`.
     """
     out = Path(out)
-    _check_format(bit_depth, image_format)
+    _check_inputs(params, bit_depth, image_format)
     rig = rig or default_rig(image_size)
     noise = SensorNoise() if noise is None else noise
     rng = np.random.default_rng(seed)
@@ -307,7 +307,9 @@ def _check_renderer(renderer: str, normalization: str | None) -> str:
     return "ward1992" if normalization is None else normalization
 
 
-def _check_format(bit_depth: int, image_format: str) -> None:
+def _check_inputs(params: WardParams, bit_depth: int, image_format: str) -> None:
+    """The probe's parameters within the model's range (the shared rules), the image format one that exists."""
+    check_ward_params(params.rho_d, params.rho_s, params.alpha_x, params.alpha_y)
     if bit_depth not in (8, 16):
         raise ValueError(f"bit_depth must be 8 or 16, got {bit_depth}")
     if image_format not in ("png", "tif", "jpg"):

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..capture import load_display, load_viewing
+from ..capture import check_photo_region, load_display, load_viewing
 from ..ward import WardParams
 from ._alpha_model import AlphaModel
 from ._alpha_posterior import _as_thresholds
@@ -66,7 +66,16 @@ def fit_smartphone(
         over ``n_range`` (ρs is assumed, not measured); ``alpha_x``/``alpha_y`` — posterior SD;
         also ``alpha_interval_68`` and ``alpha_interval_95``.
     posterior : AlphaPosterior
+
+    Raises
+    ------
+    ValueError
+        :class:`~wardjax.capture.RuleError` when over half the region is black or clipped in a channel.
     """
+    photo = np.asarray(photo_rgb)
+    y0, y1, x0, x1 = region
+    top = float(np.iinfo(photo.dtype).max) if np.issubdtype(photo.dtype, np.integer) else 1.0
+    check_photo_region("photo_rgb", photo[y0:y1, x0:x1], top)  # a clipped region's ρd is 0 or 1 "± 0"
     rho_d, rho_d_se = diffuse_from_srgb(photo_rgb, region, decoding=decoding, return_stderr=True)
     rho_s = specular_from_fresnel(n)
     lo, hi = np.asarray(specular_from_fresnel(np.asarray(n_range, dtype=float)))  # an array in, an array out

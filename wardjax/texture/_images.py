@@ -7,6 +7,7 @@ from pathlib import Path
 import numpy as np
 
 from .._files import srgb8, write_image
+from ..capture import check_rho_d_map
 
 
 def write_texture_image(path, image) -> Path:
@@ -24,8 +25,14 @@ def write_texture_image(path, image) -> Path:
 
 
 def read_rho_d(path) -> np.ndarray:
-    """Read a linear ρd map (``.tif``/``.tiff`` or ``.npy``) as float64 ``(H, W)`` or ``(H, W, C)``."""
+    """Read a linear ρd map (``.tif``/``.tiff`` or ``.npy``) as float64 ``(H, W)`` or ``(H, W, C)``.
+
+    Integer images (codes, not reflectances) and maps with values far outside [0, 1] are refused
+    with a note on how to convert them (:func:`wardjax.capture._rules.check_rho_d_map`).
+    """
     path = Path(path)
+    if path.is_dir():
+        raise ValueError(f"{path}: is a folder, expected a ρd file (.tif, .tiff or .npy)")
     if not path.is_file():
         raise ValueError(f"{path}: no such file")
     suffix = path.suffix.lower()
@@ -44,4 +51,5 @@ def read_rho_d(path) -> np.ndarray:
         raise ValueError(f"{path}: cannot read ({e})") from None
     if a.ndim not in (2, 3) or not np.issubdtype(a.dtype, np.number):
         raise ValueError(f"{path}: expected an (H, W) or (H, W, C) numeric image, got {a.dtype} {a.shape}")
+    check_rho_d_map(str(path), a)  # RuleError names the path
     return a.astype(np.float64)

@@ -203,6 +203,8 @@ class TextureModel(eqx.Module):
     def load(cls, path) -> TextureModel:
         """Read a model written by :meth:`save` (``.json`` or ``.npz``), checking format, version and shapes."""
         path = Path(path)
+        if path.is_dir():
+            raise ValueError(f"{path}: is a folder, expected a texture file (.json or .npz)")
         if not path.is_file():
             raise ValueError(f"{path}: no such texture file")
         suffix = path.suffix.lower()
