@@ -68,6 +68,12 @@ class CaptureFit:
     profile
         The scanline plotted in ``scanline.png``: ``y`` (mm), measured ``f_r``,
         ``model`` and ``rho_d`` along it, and its ``x``.
+    fit_map
+        The fitted data over the image, at the fit's binning (written as
+        ``residuals.npz``): ``f_r`` and ``model`` ``(rows, cols, 3)`` (NaN
+        where a bin was not fitted), ``binning`` ``b`` and ``origin`` — the
+        image pixel ``(row, col)`` of the first bin's corner. Bin ``(i, j)``
+        covers image rows ``origin[0] + b·i …`` and columns ``origin[1] + b·j …``.
     tangent, checksums
         From the capture.
     """
@@ -87,6 +93,7 @@ class CaptureFit:
     probe: np.ndarray
     diagnostics: dict
     profile: dict
+    fit_map: dict
     tangent: tuple[float, float]
     checksums: dict
 
@@ -226,6 +233,7 @@ def fit_capture(cap: Capture, *, max_fit_samples: int = 50_000, band_rows: int =
         probe=probe,
         diagnostics=diagnostics,
         profile=profile,
+        fit_map=_fit_map(F, model_f, keep, bins),
         tangent=tangent,
         checksums=dict(cap.checksums),
     )
@@ -305,6 +313,17 @@ def _diagnostics(
             "std": [float(c) for c in np.std(rho_d[tex_ok], axis=0)] if tex_ok.any() else [float("nan")] * 3,
         },
     }
+
+
+def _fit_map(F, model_f, keep, bins) -> dict:
+    """Measured and fitted ``f_r`` on the image grid of the bins (scanlines are image columns)."""
+    n_cols, n_rows = len(keep), F.shape[1]
+    f_img = np.full((n_rows, n_cols, 3), np.nan, np.float32)
+    m_img = np.full((n_rows, n_cols, 3), np.nan, np.float32)
+    f_img[:, keep] = F.transpose(1, 0, 2)
+    m_img[:, keep] = np.where(np.isfinite(F), model_f, np.nan).transpose(1, 0, 2)
+    rows, cols = bins.box
+    return {"f_r": f_img, "model": m_img, "binning": int(bins.b), "origin": (int(rows.start), int(cols.start))}
 
 
 def _profile(F, Y, model_f, spec, n_per, x_scan) -> dict:
