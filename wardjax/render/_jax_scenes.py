@@ -10,8 +10,9 @@ normal ``n``; the material frame's ``x`` is the tangent ``u − (u·n) n``
     L_o(P) = \\sum_k L_k\\, e_k\\, ω_k \\cos θ_{i,k}\\, f_r(ω_{i,k}, ω_o;\\, a_k),
     \\qquad a_k^2 = α^2 + \\frac{ω_k}{4π}
 
-(the widening only where Radiance applies it: on flat surfaces) over the sources above the surface's horizon (and, for a screen cell, with
-``P`` in front of it): distant sources have fixed ``ω_i`` and ``ω``; a screen
+(the widening only where Radiance applies it: on flat surfaces) over the
+sources above the surface's horizon (and, for a screen cell, with ``P`` in
+front of it): distant sources have fixed ``ω_i`` and ``ω``; a screen
 cell of area ``A`` at distance ``d`` has ``ω = A cos θs / d²`` and emission
 factor ``e = cos^m θs``. ``f_r`` is :func:`wardjax.ward_brdf`. Sources are
 visited in chunks by ``jax.lax.scan``, so memory stays ``O(pixels × chunk)``

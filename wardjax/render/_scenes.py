@@ -296,11 +296,13 @@ def phone_scene(
     if look_at is None:
         centre_pt = origin + width / 2 * u_axis + length / 2 * v_axis
         mirror = centre_pt * np.array([1.0, 1.0, -1.0])
-        s = eye[2] / (eye[2] - mirror[2])
-        look_at = tuple(eye + s * (mirror - eye))
-    assert look_at is not None
+        aim = eye + eye[2] / (eye[2] - mirror[2]) * (mirror - eye)
+    else:
+        aim = np.asarray(look_at, np.float64)
     w, h = (int(v) for v in size)
     f = (w / 2) / math.tan(math.radians(fov_deg) / 2)
-    cam = Camera(position=tuple(eye), look_at=tuple(look_at), focal_px=f, image_size=(w, h), up=(0.0, 1.0, 0.0))
+    ex, ey, ez = (float(c) for c in eye)
+    ax, ay, az = (float(c) for c in aim)
+    cam = Camera(position=(ex, ey, ez), look_at=(ax, ay, az), focal_px=f, image_size=(w, h), up=(0.0, 1.0, 0.0))
     box = (-width / 2 - 20.0, width / 2 + 20.0, -200.0, float(y0))
     return PhoneScene(cam, sources, box, tuple(origin), tuple(width * u_axis), tuple(length * v_axis))
