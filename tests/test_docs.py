@@ -84,9 +84,10 @@ def test_stage_packages_list_their_reexports_in_all():
 
 
 def test_method_pages_and_notebooks_are_in_the_site(site):
-    for page in ("cli", "image-based", "smartphone", "engine", "texture", "missing-effects", "layout", "benchmarks"):
+    pages = ("cli", "image-based", "smartphone", "engine", "texture", "missing-effects", "rendering", "layout")
+    for page in (*pages, "benchmarks"):
         assert (site / page / "index.html").is_file(), page
-    for nb in ("alpha_uncertainty", "missing_effects", "fit_folder", "texture"):
+    for nb in ("alpha_uncertainty", "missing_effects", "fit_folder", "texture", "validation"):
         assert (site / "notebooks" / nb / "index.html").is_file(), nb
 
 
