@@ -23,7 +23,7 @@ def site(tmp_path_factory):
     env = {**os.environ, "NO_MKDOCS_2_WARNING": "1"}
     mkdocs = str(Path(sys.executable).parent / "mkdocs")
     res = subprocess.run(
-        [mkdocs, "build", "--strict", "-q", "-d", str(out)],
+        [mkdocs, "build", "--strict", "-d", str(out)],  # not -q: quiet hides the warnings strict counts
         cwd=ROOT,
         env=env,
         capture_output=True,
