@@ -88,33 +88,66 @@ def _match_rows(x, lookup, table=None, probs=None):
     return jax.vmap(_match_row, in_axes=(0, 0, 0, None))(x, lookup, table, probs)
 
 
-@texture_jit
-def match_pixels(noise: Float[Array, "c 1 n"], pixel_lookup: Float[Array, "c m"]) -> Float[Array, "c 1 n"]:
-    """The start of the synthesis: each channel's noise matched to its pixel histogram."""
-    return _match_rows(noise.reshape(noise.shape[0], -1), pixel_lookup)[0].reshape(noise.shape)
-
-
-@texture_jit(static_argnames=("shapes", "final"))
-def iteration(d, masks, band_lookup, band_tables, pixel_lookup, probs, shapes, final: bool = False):
-    """One Heeger–Bergen iteration of the channels ``d`` ``(C, 1, H W)`` with binned matching.
-
-    Pyramid of ``d``; every subband matched to its lookup ``band_lookup[b]``
-    ``(C, M)``; collapse; pixels matched to ``pixel_lookup`` ``(C, M)``.
-    Returns the new ``d`` and the KS distances ``(C, B)`` of the subbands
-    *before* matching (against ``band_tables[b]`` ``(C, Q)``). With
-    ``final``, only the distances are computed (``d`` is returned unchanged).
-    """
-    c = d.shape[0]
-    spec = jnp.fft.rfft2(d.reshape(c, *shapes[0]), norm="forward")
-    groups = _groups(pyramid_subbands(spec, masks, shapes), c)
+def _one_channel(d, band_lookup, band_tables, pixel_lookup, masks, probs, shapes, final: bool, start: bool):
+    """One channel ``(1, 1, H W)`` through one iteration (see :func:`iteration`)."""
+    if start:
+        return _match_rows(d.reshape(1, -1), pixel_lookup)[0].reshape(d.shape), jnp.zeros(
+            (1, len(band_lookup)), d.dtype
+        )
+    spec = jnp.fft.rfft2(d.reshape(1, *shapes[0]), norm="forward")
+    groups = _groups(pyramid_subbands(spec, masks, shapes), 1)
     matched, ks = [], []
     for g, lookup, table in zip(groups, band_lookup, band_tables):
-        mt, k = _match_rows(g.reshape(c, -1), lookup, table, probs)
+        mt, k = _match_rows(g.reshape(1, -1), lookup, table, probs)
         matched.append(mt)
         ks.append(k)
     ks = jnp.stack(ks, axis=-1)
     if final:
         return d, ks
-    subbands = tuple(mt.reshape(c, *s) for mt, s in zip(matched, _subband_shapes(shapes)))
-    out = pyramid_collapse(subbands, masks, shapes).reshape(c, -1)
+    subbands = tuple(mt.reshape(1, *s) for mt, s in zip(matched, _subband_shapes(shapes)))
+    out = pyramid_collapse(subbands, masks, shapes).reshape(1, -1)
     return _match_rows(out, pixel_lookup)[0].reshape(d.shape), ks
+
+
+@texture_jit(static_argnames=("shapes", "final", "start", "mesh"))
+def iteration(d, band_lookup, band_tables, pixel_lookup, masks, probs, shapes, final=False, start=False, mesh=None):
+    """One Heeger–Bergen iteration of the channels ``d`` ``(C, 1, H W)`` with binned matching.
+
+    Per channel: pyramid of ``d``; every subband matched to its lookup
+    ``band_lookup[b]`` ``(C, M)``; collapse; pixels matched to
+    ``pixel_lookup`` ``(C, M)``. Returns the new ``d`` and the KS distances
+    ``(C, B)`` of the subbands *before* matching (against ``band_tables[b]``
+    ``(C, Q)``). With ``final``, only the distances (``d`` unchanged); with
+    ``start``, only the pixel matching (of the noise; distances zero).
+
+    The channels go one at a time through the same program body
+    (``lax.map``); with a ``mesh``, each device maps over its own channels
+    (``shard_map`` over the 1-D mesh's channel axis). Either way every channel
+    sees the same arithmetic, so the image does not depend on the devices.
+    """
+
+    def block(d, band_lookup, band_tables, pixel_lookup, masks, probs):
+        def one(args):
+            x, bl, bt, pl = args
+            y, k = _one_channel(
+                x[None],
+                tuple(b[None] for b in bl),
+                tuple(t[None] for t in bt),
+                pl[None],
+                masks,
+                probs,
+                shapes,
+                final,
+                start,
+            )
+            return y[0], k[0]
+
+        return jax.lax.map(one, (d, band_lookup, band_tables, pixel_lookup))
+
+    if mesh is None:
+        return block(d, band_lookup, band_tables, pixel_lookup, masks, probs)
+    split, same = jax.sharding.PartitionSpec("channel"), jax.sharding.PartitionSpec()
+    specs = (split, split, split, split, same, same)
+    return jax.shard_map(block, mesh=mesh, in_specs=specs, out_specs=(split, split), check_vma=False)(
+        d, band_lookup, band_tables, pixel_lookup, masks, probs
+    )

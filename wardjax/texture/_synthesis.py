@@ -132,66 +132,42 @@ def _heeger_bergen(rng, band_q, pixel_q, probs64, masks, shapes, iterations: int
     return ds, ks
 
 
-def _blocks(c: int, devices) -> tuple[list[list[int]], jax.sharding.Sharding, jax.sharding.Sharding]:
-    """How the channels run: blocks of channels, the sharding of a block's arrays and of the shared ones.
-
-    On one CPU device, one block per channel: XLA runs the channels' programs
-    side by side on the host's threads (the programs themselves are
-    single-threaded, :mod:`~wardjax.texture._jit`). Otherwise one block of all
-    channels, padded to a multiple of the number of devices and split over
-    them along the channel axis (``NamedSharding`` over a 1-D mesh); the
-    channels are independent, so no device waits for another.
-    """
-    mesh = jax.sharding.Mesh(np.asarray(devices), ("channel",))
-    split = jax.sharding.NamedSharding(mesh, jax.sharding.PartitionSpec("channel"))
-    shared = jax.sharding.NamedSharding(mesh, jax.sharding.PartitionSpec())
-    if len(devices) == 1 and devices[0].platform == "cpu":
-        return [[ch] for ch in range(c)], split, shared
-    padded = -(-c // len(devices)) * len(devices)
-    return [[min(ch, c - 1) for ch in range(padded)]], split, shared
-
-
 def _heeger_bergen_binned(rng, band_q, pixel_q, probs64, shapes, iterations: int, progress, devices):
     """:func:`_heeger_bergen` with Heeger & Bergen's binned matching (:mod:`~wardjax.texture._binned`), all in XLA.
 
     The same noise stream and iterations; the KS distances are measured from
-    the bin counts. Channels run in blocks spread over ``devices``
-    (:func:`_blocks`). Returns the ``C`` channels ``(1, 1, H W)`` (NumPy) and
-    the KS distances ``(iterations + 1, C, B)``.
+    the bin counts. With several ``devices`` the channels, padded to a
+    multiple of their number, are split over them along the channel axis
+    (``NamedSharding`` over a 1-D mesh; the channels are independent, so no
+    device waits for another). Returns the ``C`` channels ``(1, 1, H W)``
+    (NumPy) and the KS distances ``(iterations + 1, C, B)``.
     """
     c, n_pix = pixel_q.shape[0], shapes[0][0] * shapes[0][1]
-    noise = [rng.standard_normal((1, 1, n_pix), dtype=np.float32) for _ in range(c)]  # the exact path's stream
-    blocks, split, shared = _blocks(c, devices)
+    noise = [rng.standard_normal((1, n_pix), dtype=np.float32) for _ in range(c)]  # the exact path's stream
+    mesh = jax.sharding.Mesh(np.asarray(devices), ("channel",))
+    chans = [min(ch, c - 1) for ch in range(-(-c // len(devices)) * len(devices))]
+    split = jax.sharding.NamedSharding(mesh, jax.sharding.PartitionSpec("channel"))
+    shared = jax.sharding.NamedSharding(mesh, jax.sharding.PartitionSpec())
+    put = lambda a: jax.device_put(np.ascontiguousarray(a), split)
     masks = jax.device_put(_device_masks(shapes[0], len(shapes) - 1, "float32"), shared)
     probs = jax.device_put(np.asarray(probs64, np.float32), shared)
-    n_bands = band_q.shape[1]
-    state = []
-    for chans in blocks:
-        put = lambda a: jax.device_put(np.ascontiguousarray(a), split)
-        band_lookup = tuple(put(_binned.quantile_lookup(band_q[chans, b], probs64)) for b in range(n_bands))
-        band_tables = tuple(put(band_q[chans, b].astype(np.float32)) for b in range(n_bands))
-        pixel_lookup = put(_binned.quantile_lookup(pixel_q[chans], probs64))
-        d = _binned.match_pixels(put(np.concatenate([noise[ch] for ch in chans])), pixel_lookup)
-        state.append([d, band_lookup, band_tables, pixel_lookup])
-    ks = [[] for _ in blocks]
+    tables = (
+        tuple(put(_binned.quantile_lookup(band_q[chans, b], probs64)) for b in range(band_q.shape[1])),
+        tuple(put(band_q[chans, b].astype(np.float32)) for b in range(band_q.shape[1])),
+        put(_binned.quantile_lookup(pixel_q[chans], probs64)),
+        masks,
+        probs,
+    )
+    d, _ = _binned.iteration(put(np.stack([noise[ch] for ch in chans])), *tables, shapes=shapes, start=True, mesh=mesh)
+    ks = []
     for it in range(iterations + 1):
         last = it == iterations
-        for bi, (d, band_lookup, band_tables, pixel_lookup) in enumerate(state):
-            state[bi][0], k = _binned.iteration(
-                d, masks, band_lookup, band_tables, pixel_lookup, probs, shapes=shapes, final=last
-            )
-            ks[bi].append(k)
+        d, k = _binned.iteration(d, *tables, shapes=shapes, final=last, mesh=mesh)
+        ks.append(k)
         if progress is not None and not last:
             progress(it + 1, iterations)
-    seen = [0] * c
-    ds: list = [None] * c
-    for (d, *_), chans in zip(state, blocks):
-        host = np.asarray(d)
-        for row, ch in enumerate(chans):
-            if not seen[ch]:
-                ds[ch], seen[ch] = host[row : row + 1], 1
-    ks = np.stack([np.concatenate([np.asarray(k[it], np.float64) for k in ks])[:c] for it in range(iterations + 1)])
-    return ds, ks
+    host = np.asarray(d)
+    return [host[ch : ch + 1] for ch in range(c)], np.stack([np.asarray(k, np.float64)[:c] for k in ks])
 
 
 @texture_jit
