@@ -496,7 +496,7 @@ def test_07_cli_analyze_and_synthesize(tmp_path):
     )
     assert r.exit_code == 0, r.output
     assert "rows 0:80, columns 8:96" in r.output and "largest valid rectangle" in r.output
-    for name in ("out.tif", "out.png"):
+    for name, match in (("out.tif", "binned"), ("out.png", "binned"), ("exact.tif", "exact")):
         r = runner.invoke(
             main,
             [
@@ -509,6 +509,8 @@ def test_07_cli_analyze_and_synthesize(tmp_path):
                 "0",
                 "--iterations",
                 "2",
+                "--match",
+                match,
                 "-o",
                 str(tmp_path / name),
             ],
@@ -517,6 +519,13 @@ def test_07_cli_analyze_and_synthesize(tmp_path):
         assert "wrote" in r.output
     lin = tifffile.imread(tmp_path / "out.tif")
     assert lin.shape == (64, 96, 3) and lin.dtype == np.float32 and lin.min() >= 0 and lin.max() <= 0.96
+    # --match reaches the library: the exact matching gives another image from the same seed, and the library's.
+    exact = tifffile.imread(tmp_path / "exact.tif")
+    assert not np.array_equal(exact, lin)
+    model = wj.TextureModel.load(tmp_path / "texture.json")
+    np.testing.assert_array_equal(
+        exact, wj.synthesize_texture(model, (64, 96), seed=0, iterations=2, match="exact").image
+    )
     import imageio.v3 as iio
 
     srgb = iio.imread(tmp_path / "out.png")
