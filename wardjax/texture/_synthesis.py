@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import concurrent.futures
+import os
 from collections.abc import Callable
 
 import equinox as eqx
@@ -136,38 +138,55 @@ def _heeger_bergen_binned(rng, band_q, pixel_q, probs64, shapes, iterations: int
     """:func:`_heeger_bergen` with Heeger & Bergen's binned matching (:mod:`~wardjax.texture._binned`), all in XLA.
 
     The same noise stream and iterations; the KS distances are measured from
-    the bin counts. With several ``devices`` the channels, padded to a
-    multiple of their number, are split over them along the channel axis
-    (``NamedSharding`` over a 1-D mesh; the channels are independent, so no
-    device waits for another). Returns the ``C`` channels ``(1, 1, H W)``
+    the bin counts. With several ``devices`` (or one accelerator) the
+    channels, padded to a multiple of their number, are split over them along
+    the channel axis (``NamedSharding`` over a 1-D mesh; the channels are
+    independent, so no device waits for another). On one CPU device each
+    channel is its own (single-threaded) program, the channels run side by
+    side on a thread pool. Returns the ``C`` channels ``(1, 1, H W)``
     (NumPy) and the KS distances ``(iterations + 1, C, B)``.
     """
     c, n_pix = pixel_q.shape[0], shapes[0][0] * shapes[0][1]
     noise = [rng.standard_normal((1, n_pix), dtype=np.float32) for _ in range(c)]  # the exact path's stream
     mesh = jax.sharding.Mesh(np.asarray(devices), ("channel",))
-    chans = [min(ch, c - 1) for ch in range(-(-c // len(devices)) * len(devices))]
     split = jax.sharding.NamedSharding(mesh, jax.sharding.PartitionSpec("channel"))
     shared = jax.sharding.NamedSharding(mesh, jax.sharding.PartitionSpec())
+    if len(devices) == 1 and devices[0].platform == "cpu":
+        groups = [[ch] for ch in range(c)]  # one program per channel, side by side on the host's threads
+    else:
+        groups = [[min(ch, c - 1) for ch in range(-(-c // len(devices)) * len(devices))]]
     put = lambda a: jax.device_put(np.ascontiguousarray(a), split)
     masks = jax.device_put(_device_masks(shapes[0], len(shapes) - 1, "float32"), shared)
     probs = jax.device_put(np.asarray(probs64, np.float32), shared)
-    tables = (
-        tuple(put(_binned.quantile_lookup(band_q[chans, b], probs64)) for b in range(band_q.shape[1])),
-        tuple(put(band_q[chans, b].astype(np.float32)) for b in range(band_q.shape[1])),
-        put(_binned.quantile_lookup(pixel_q[chans], probs64)),
-        masks,
-        probs,
-    )
-    d, _ = _binned.iteration(put(np.stack([noise[ch] for ch in chans])), *tables, shapes=shapes, start=True, mesh=mesh)
+    tables, ds = [], []
+    for chans in groups:
+        tables.append(
+            (
+                tuple(put(_binned.quantile_lookup(band_q[chans, b], probs64)) for b in range(band_q.shape[1])),
+                tuple(put(band_q[chans, b].astype(np.float32)) for b in range(band_q.shape[1])),
+                put(_binned.quantile_lookup(pixel_q[chans], probs64)),
+                masks,
+                probs,
+            )
+        )
+        ds.append(put(np.stack([noise[ch] for ch in chans])))
+
+    def step(g: int, **kw):
+        out = _binned.iteration(ds[g], *tables[g], shapes=shapes, mesh=mesh, **kw)
+        return jax.block_until_ready(out)
+
     ks = []
-    for it in range(iterations + 1):
-        last = it == iterations
-        d, k = _binned.iteration(d, *tables, shapes=shapes, final=last, mesh=mesh)
-        ks.append(k)
-        if progress is not None and not last:
-            progress(it + 1, iterations)
-    host = np.asarray(d)
-    return [host[ch : ch + 1] for ch in range(c)], np.stack([np.asarray(k, np.float64)[:c] for k in ks])
+    with concurrent.futures.ThreadPoolExecutor(min(len(groups), os.cpu_count() or 1)) as pool:
+        for it in range(-1, iterations + 1):
+            kw = {"start": True} if it < 0 else {"final": it == iterations}
+            out = list(pool.map(lambda g: step(g, **kw), range(len(groups))))
+            ds = [d for d, _ in out]
+            if it >= 0:
+                ks.append(np.concatenate([np.asarray(k, np.float64) for _, k in out])[:c])
+            if progress is not None and 0 <= it < iterations:
+                progress(it + 1, iterations)
+    host = np.concatenate([np.asarray(d) for d in ds])
+    return [host[ch : ch + 1] for ch in range(c)], np.stack(ks)
 
 
 @texture_jit
