@@ -16,6 +16,7 @@ from __future__ import annotations
 import functools
 
 import jax
+from jax.core import Tracer
 
 COMPILER_OPTIONS = {"xla_cpu_multi_thread_eigen": False}
 
@@ -34,7 +35,7 @@ def texture_jit(fun=None, **kwargs):
 
     @functools.wraps(fun)
     def call(*args, **kw):
-        traced = any(isinstance(x, jax.core.Tracer) for x in jax.tree_util.tree_leaves((args, kw)))
+        traced = any(isinstance(x, Tracer) for x in jax.tree_util.tree_leaves((args, kw)))
         return (nested if traced else top)(*args, **kw)
 
     return call

@@ -5,6 +5,7 @@ from __future__ import annotations
 import concurrent.futures
 import os
 from collections.abc import Callable
+from typing import cast
 
 import equinox as eqx
 import jax
@@ -352,7 +353,7 @@ def synthesize_texture(
             ds, ks = _heeger_bergen_binned(rng, *tables, shapes, iterations, progress, devices)
         else:
             masks = _device_masks((hh, ww), model.height, "float32")
-            ds, ks = _heeger_bergen(rng, *tables, masks, shapes, iterations, sort, progress)
+            ds, ks = _heeger_bergen(rng, *tables, masks, shapes, iterations, cast(SortMethod, sort), progress)
         mu, cov = (np.asarray(a) for a in _channel_moments(ds))
         # x = V (μ + W (d − μ)) + m: decorrelate, back to RGB, clamp, in one pass over the pixels.
         mix = model.pca_basis @ _decorrelation(cov)
