@@ -490,6 +490,13 @@ def texture_analyze(
 @click.option("--seed", type=int, default=0, show_default=True)
 @click.option("--iterations", type=click.IntRange(1, 100), default=5, show_default=True)
 @click.option(
+    "--match",
+    type=click.Choice(["binned", "exact"]),
+    default="binned",
+    show_default=True,
+    help="Histogram matching: Heeger & Bergen's binned CDFs and lookup (O(N)), or exact by sorting.",
+)
+@click.option(
     "-o",
     "--out",
     "out_path",
@@ -497,7 +504,7 @@ def texture_analyze(
     required=True,
     help=".tif: linear float ρd; .png: 8-bit sRGB view.",
 )
-def texture_synthesize(model_path: Path, size: str, seed: int, iterations: int, out_path: Path) -> None:
+def texture_synthesize(model_path: Path, size: str, seed: int, iterations: int, match: str, out_path: Path) -> None:
     """Synthesise a seamlessly tiling ρd texture of any size from a TEXTURE description."""
     from ..texture import TextureModel, synthesize_texture, write_texture_image
 
@@ -528,7 +535,12 @@ def texture_synthesize(model_path: Path, size: str, seed: int, iterations: int, 
         ) as bar:
             task = bar.add_task("", total=iterations)
             result = synthesize_texture(
-                model, shape, seed=seed, iterations=iterations, progress=lambda k, n: bar.update(task, completed=k)
+                model,
+                shape,
+                seed=seed,
+                iterations=iterations,
+                match=match,
+                progress=lambda k, n: bar.update(task, completed=k),
             )
         write_texture_image(out_path, result.image)
     except (ValueError, OSError) as e:  # the library speaks of shape=(height, width); the user typed --size WxH

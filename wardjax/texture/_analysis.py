@@ -2,14 +2,13 @@
 
 from __future__ import annotations
 
-import functools
-
 import jax
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
 from ._histogram import quantile_probabilities
+from ._jit import texture_jit
 from ._model import TextureModel
 from ._pyramid import (
     ORIENTATIONS,
@@ -80,7 +79,7 @@ def _rho_s_vector(rho_s, channels: int, name: str = "rho_s") -> np.ndarray:
     return r
 
 
-@jax.jit
+@texture_jit
 def _pixel_moments(x: Float[Array, "h w c"]) -> tuple[Float[Array, " c"], Float[Array, "c c"]]:
     """Mean and sample covariance (divided by ``n − 1``, as ``np.cov``) of the pixels of ``x`` (float64)."""
     p = x.reshape(-1, x.shape[-1])
@@ -107,7 +106,7 @@ def _groups(subbands, c: int) -> tuple:
     return tuple(b.reshape(c, 1, -1) for b in subbands)
 
 
-@functools.partial(jax.jit, static_argnames="shapes")
+@texture_jit(static_argnames="shapes")
 def _analysis_groups(x, mean, axis, masks, shapes):
     """One decorrelated channel ``d = (x − μ) · axis`` (float32) → periodic component → pyramid → subband groups,
     then the pixels ``(1, 1, H W)``."""
