@@ -36,8 +36,8 @@ def _entry_points(counts) -> dict[str, int]:
     return out
 
 
-def _tree(folder: Path) -> dict[str, bytes]:
-    """Every file under ``folder`` (hidden ones too), ``params.json`` without its ``created`` timestamp."""
+def _tree(folder: Path) -> dict:
+    """Every file under ``folder`` (hidden ones too); ``params.json`` parsed, without its ``created`` timestamp."""
     out = {}
     for f in sorted(folder.rglob("*")):
         if f.is_file():
@@ -45,9 +45,28 @@ def _tree(folder: Path) -> dict[str, bytes]:
             if f.name == "params.json":
                 doc = json.loads(data)
                 assert isinstance(doc.pop("created"), str)
-                data = json.dumps(doc, sort_keys=True).encode()
+                data = doc
             out[str(f.relative_to(folder))] = data
     return out
+
+
+def _close(a, b, path="") -> list[str]:
+    """Where two JSON documents differ: structure and strings exactly, numbers to 10⁻¹² relative.
+
+    Workers hold BLAS and XLA to one thread each; this process uses both cores, and a sum split over
+    two threads may round its last bit differently (seen: χ² and the model covariance's σ, 1 ulp).
+    """
+    if isinstance(a, dict) and isinstance(b, dict):
+        if a.keys() != b.keys():
+            return [f"{path}: keys {sorted(a.keys() ^ b.keys())}"]
+        return [d for k in a for d in _close(a[k], b[k], f"{path}.{k}")]
+    if isinstance(a, list) and isinstance(b, list):
+        if len(a) != len(b):
+            return [f"{path}: lengths {len(a)} {len(b)}"]
+        return [d for i, (x, y) in enumerate(zip(a, b)) for d in _close(x, y, f"{path}[{i}]")]
+    if isinstance(a, float) and isinstance(b, float):
+        return [] if abs(a - b) <= 1e-12 * max(abs(a), abs(b)) else [f"{path}: {a} {b}"]
+    return [] if a == b else [f"{path}: {a!r} {b!r}"]
 
 
 def test_scheduler_specs():
@@ -111,7 +130,10 @@ def test_cluster_with_a_killed_worker_ends_as_the_local_path(tmp_path):
         compiles = cluster_compiles(client)
     assert killed and [it.status for it in items] == ["ok"] * 10
     assert [it.name for it in items] == [it.name for it in ref_items]
-    assert _tree(out) == _tree(tmp_path / "ref")
+    got, want = _tree(out), _tree(tmp_path / "ref")
+    assert got.keys() == want.keys()
+    assert _close(got, want) == []
+    assert all(got[k] == want[k] for k in got if not k.endswith("params.json"))  # every other file: bit for bit
     assert mtimes == {n: (out / n / "params.json").stat().st_mtime_ns for n in mtimes} and len(mtimes) == 10
     assert len(compiles) == 2 and any(compiles.values())
     for c in compiles.values():
