@@ -140,6 +140,12 @@ def _scanlines_csv(fit) -> bytes:
     return buf.getvalue().encode()
 
 
+# rho_d.tif is written in tiles of this side (tiled TIFF: readers fetch a region without the whole image).
+TIFF_TILE = 256
+# texture.json analyses at most this many pixels a side of the valid region (see analyze_texture's max_side).
+TEXTURE_MAX_SIDE = 2048
+
+
 def write_capture_outputs(fit, out_dir, *, created: str) -> dict:
     """Write every output of a fitted capture into ``out_dir``; ``params.json`` last.
 
@@ -160,9 +166,11 @@ def write_capture_outputs(fit, out_dir, *, created: str) -> dict:
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     files = {}
-    write_image(out / "rho_d.tif", fit.rho_d.astype(np.float32))
+    rho_d = np.asarray(fit.rho_d, np.float32)  # no copy: fit_capture makes float32
+    write_image(out / "rho_d.tif", rho_d, tile=TIFF_TILE)
     files["texture"] = "rho_d.tif"
-    write_image(out / "rho_d.png", srgb8(fit.rho_d))
+    # The sRGB view band by band (elementwise; a whole float64 copy of a 50 MP image is 1.2 GB).
+    write_image(out / "rho_d.png", np.concatenate([srgb8(rho_d[r : r + 512]) for r in range(0, len(rho_d), 512)]))
     files["texture_preview"] = "rho_d.png"
     write_bytes_atomic(out / "scanline.png", scanline_figure_png(fit))
     files["scanline_plot"] = "scanline.png"
@@ -183,7 +191,7 @@ def write_capture_outputs(fit, out_dir, *, created: str) -> dict:
     extra = {}
     # The parametric texture (image-based paper, section 4.2).
     try:
-        model = analyze_texture(fit.rho_d, rho_s=float(np.mean(fit.params.rho_s)))
+        model = analyze_texture(rho_d, rho_s=float(np.mean(fit.params.rho_s)), max_side=TEXTURE_MAX_SIDE)
         model.save(out / "texture.json")
         files["texture_model"] = "texture.json"
     except ValueError as e:  # e.g. the valid region is too small to analyse

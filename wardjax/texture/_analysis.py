@@ -133,6 +133,7 @@ def analyze_texture(
     height: int | None = None,
     n_quantiles: int = 129,
     rho_s=0.0,
+    max_side: int | None = None,
 ) -> TextureModel:
     """Parametric description of a ρd texture (image-based paper, section 4.2; Heeger & Bergen 1995).
 
@@ -159,6 +160,12 @@ def analyze_texture(
     rho_s
         Specular reflectance of the material (scalar or per channel); synthesis
         clamps ρd to ``[0, 1 − ρs]`` (energy conservation).
+    max_side
+        If given, a region (step 1) longer than this on a side is cut to its
+        centred ``max_side``-long part (``region_source`` says so): the model
+        keeps quantiles, which a few million pixels determine as well as tens
+        of millions, while the pyramid's memory grows with the pixels
+        (:func:`wardjax.write_capture_outputs` uses 2048 for big captures).
 
     Returns
     -------
@@ -187,6 +194,11 @@ def analyze_texture(
         y0, y1, x0, x1 = largest_valid_rectangle(~bad.any(axis=-1))
         source = "largest valid rectangle"
     rh, rw = y1 - y0, x1 - x0
+    if max_side is not None and max(rh, rw) > max_side:
+        y0, x0 = y0 + max(rh - max_side, 0) // 2, x0 + max(rw - max_side, 0) // 2
+        y1, x1 = y0 + min(rh, max_side), x0 + min(rw, max_side)
+        rh, rw = y1 - y0, x1 - x0
+        source = f"{source}, centred {rh}x{rw} part"
     if min(rh, rw) < _MIN_SIDE:
         raise ValueError(
             f"the analysed region (rows {y0}:{y1}, columns {x0}:{x1}, {source}) is {rh}x{rw} pixels; "
