@@ -480,6 +480,53 @@ def _unexplained_structure(search: _Search, cur: _View, partial: list[Candidate]
     return unexplained, structure
 
 
+class _Steps:
+    """The step loop's state: the current fit, the states so far, what was found, partial matches, ambiguities."""
+
+    def __init__(self, cur: _View):
+        self.cur = cur
+        self.states = [cur.state]
+        self.found: list[str] = []
+        self.steps: list[Step] = []
+        self.partial: list[Candidate] = []
+        self.ambiguous: list[tuple[str, str, float]] = []
+
+    def search(self, search, max_steps, alpha, min_explained, structure_p, stop_within_noise, sample) -> bool:
+        """Add effects until none is justified; True if it stopped because the gap is within the noise."""
+        testable = search.testable
+        for _ in range(max_steps):
+            cur = self.cur
+            if stop_within_noise and self.found and _within_noise(cur.state):
+                return True
+            remaining = [i for i in range(len(testable)) if i not in cur.state.active]
+            if not remaining:
+                break
+            ranked = _rank_candidates(search, cur, remaining)
+            if ranked is None:
+                break
+            cands, by_effect = ranked
+            win = cands[0]
+            if not (win.delta_bic > 0 and win.p_value * len(remaining) < alpha):
+                break
+            if win.explained < min_explained and win.gap_p_after < structure_p:
+                self.partial.append(win)
+                break
+            self.ambiguous += [
+                (win.effect, c.effect, win.delta_bic - c.delta_bic)
+                for c in cands[1:]
+                if c.effect in _CONFUSABLE.get(win.effect, ())
+                and c.delta_bic > 0
+                and win.delta_bic - c.delta_bic < _AMBIGUOUS_BIC
+            ]
+            i_win = next(i for i in remaining if testable[i].name == win.effect)
+            new = search.residual_view(by_effect[i_win])
+            self.steps.append(_make_step(testable[i_win], win, cands, cur, new, sample))
+            self.found.append(testable[i_win].name)
+            self.cur = new
+            self.states.append(new.state)
+        return False
+
+
 def _with_texture(data, cur: _View):
     """``data`` with the texture carried as a Gaussian process, and a summary; ``None`` if none is found.
 
@@ -565,11 +612,9 @@ def discover(
         ρs and α absorb to Δχ² ≈ 30 leaves a baseline gap within the noise
         and is still named.
     texture
-        Carry the probe's ρd texture in the model (scanline data): after the
-        baseline fit, the noise and the texture's autocovariance are
-        estimated from its residuals (:mod:`wardjax.effects._texture`) and,
-        where the texture is significant, every fit uses the correlated
-        likelihood.
+        Carry the probe's ρd texture in the model as a Gaussian process whose
+        autocovariance is estimated from the baseline's residuals
+        (:mod:`wardjax.effects._texture`), where it is significant.
 
     Returns
     -------
@@ -593,44 +638,9 @@ def discover(
     sample = None
     if keep_plot_data:
         sample = _plot_sampler(search.mask, int(search.mask.sum()) if search.mask is not None else cur.r.size, seed)
-    states = [cur.state]
-    found: list[str] = []
-    steps: list[Step] = []
-    partial: list[Candidate] = []
-    stopped = False
-    ambiguous: list[tuple[str, str, float]] = []
-    for _ in range(max_steps):
-        if stop_within_noise and found and _within_noise(cur.state):
-            stopped = True
-            break
-        remaining = [i for i in range(len(testable)) if i not in cur.state.active]
-        if not remaining:
-            break
-        ranked = _rank_candidates(search, cur, remaining)
-        if ranked is None:
-            break
-        cands, by_effect = ranked
-        win = cands[0]
-        justified = win.delta_bic > 0 and win.p_value * len(remaining) < alpha
-        if not justified:
-            break
-        if win.explained < min_explained and win.gap_p_after < structure_p:
-            partial.append(win)
-            break
-        ambiguous += [
-            (win.effect, c.effect, win.delta_bic - c.delta_bic)
-            for c in cands[1:]
-            if c.effect in _CONFUSABLE.get(win.effect, ())
-            and c.delta_bic > 0
-            and win.delta_bic - c.delta_bic < _AMBIGUOUS_BIC
-        ]
-        i_win = next(i for i in remaining if testable[i].name == win.effect)
-        new = search.residual_view(by_effect[i_win])
-        steps.append(_make_step(testable[i_win], win, cands, cur, new, sample))
-        found.append(testable[i_win].name)
-        cur = new
-        states.append(cur.state)
-
+    run = _Steps(cur)
+    stopped = run.search(search, max_steps, alpha, min_explained, structure_p, stop_within_noise, sample)
+    cur, states, found, steps, partial = run.cur, run.states, run.found, run.steps, run.partial
     unexplained, structure = _unexplained_structure(search, cur, partial, structure_p)
     return DiscoveryReport(
         model=getattr(model, "title", type(model).__name__),
@@ -649,7 +659,7 @@ def discover(
         partial=[c.effect for c in partial],
         tested=[e.name for e in testable],
         seconds=time.perf_counter() - t0,
-        ambiguous=ambiguous,
+        ambiguous=run.ambiguous,
         settings={
             "alpha": alpha,
             "min_explained": min_explained,
