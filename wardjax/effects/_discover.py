@@ -542,7 +542,10 @@ def _with_texture(data, cur: _View):
     pred = cur.pred
     y, m = np.asarray(data.y), np.asarray(data.mask)
     exact = m if data.censored is None else m & ~np.asarray(data.censored)
-    fit = estimate_texture(y - pred, pred, exact)
+    # measured off the highlight only (prediction within 15 % of the scanline's diffuse floor), so that a
+    # lobe-shaped misfit of the baseline is not taken for texture
+    floor = np.nanquantile(np.where(m, pred, np.nan), 0.1, axis=1, keepdims=True)
+    fit = estimate_texture(y - pred, pred, exact, off=pred <= 1.15 * floor)
     if not fit.significant().any():
         return None
     sigma = np.where(m, fit.sigma(pred), 1.0)

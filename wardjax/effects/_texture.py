@@ -32,7 +32,11 @@ Estimating ``T`` and ``ρ`` from one capture
 
     for white noise ``σ²(f) = s0 + s1 f + s2 f²`` (read, shot, relative) plus
     the texture. ``s0, s1, s2, T`` are non-negative least squares over lags
-    ``k = 1…16`` for each ``ρ`` of a grid, ``ρ`` the best fit — the noise model
+    ``k = 1…16`` for each ``ρ`` of a grid, ``ρ`` the best fit: lag 1 over all
+    values (the level dependence of the noise needs the highlight), longer
+    lags only off the highlight (``off``: :func:`~wardjax.effects.discover`
+    passes the values predicted within 15 % of the scanline's diffuse floor),
+    so that a lobe-shaped misfit of the baseline is not taken for texture — the noise model
     of :mod:`~wardjax.effects._capture` (Gasser et al. 1986) extended to
     correlated texture, which the lag-1 estimate there counted as noise.
 """
@@ -70,14 +74,15 @@ def _g(rho: float, k: int) -> float:
     return (6.0 - 8.0 * rho**k + 2.0 * rho ** (2 * k)) / 6.0
 
 
-def estimate_texture(e: np.ndarray, level: np.ndarray, ok: np.ndarray) -> TextureFit:
+def estimate_texture(e: np.ndarray, level: np.ndarray, ok: np.ndarray, off: np.ndarray | None = None) -> TextureFit:
     """Noise and texture per channel from residuals ``e`` ``(S, N, C)`` at predicted ``level``, where ``ok``.
 
     See the module docstring: NNLS of ``d_k²/6`` on ``[1, f, f², g_ρ(k)]``
     over the lags, for each ``ρ`` of a grid.
     """
     c_n = e.shape[-1]
-    g = np.where(ok, e, np.nan)
+    g1 = np.where(ok, e, np.nan)
+    gk = g1 if off is None else np.where(ok & off, e, np.nan)
     s_out = np.zeros((c_n, 3))
     T = np.zeros(c_n)
     rho = np.zeros(c_n)
@@ -86,8 +91,9 @@ def estimate_texture(e: np.ndarray, level: np.ndarray, ok: np.ndarray) -> Textur
     for c in range(c_n):
         rows_y, rows_l, rows_k = [], [], []
         for k in _LAGS:
-            if 2 * k >= g.shape[1]:
+            if 2 * k >= e.shape[1]:
                 break
+            g = g1 if k == 1 else gk
             d2 = (g[:, : -2 * k, c] - 2.0 * g[:, k:-k, c] + g[:, 2 * k :, c]) ** 2 / 6.0
             lv = level[:, k:-k, c]
             m = np.isfinite(d2)
@@ -103,8 +109,8 @@ def estimate_texture(e: np.ndarray, level: np.ndarray, ok: np.ndarray) -> Textur
         coef0, res0 = nnls(base, y)
         best = (np.inf, None, 0.0)
         for r in _RHO_GRID:
-            gk = np.array([_g(r, k) for k in _LAGS])
-            col = gk[np.searchsorted(_LAGS, kk)]
+            gr = np.array([_g(r, k) for k in _LAGS])
+            col = gr[np.searchsorted(_LAGS, kk)]
             coef, res = nnls(np.concatenate([base, col[:, None]], -1), y)
             if res < best[0]:
                 best = (res, coef, r)
