@@ -77,6 +77,11 @@ __all__ = ["discover"]
 _PLOT_MAX = 20_000
 _SOLO_MIN_OBS = 20_000  # from this many residuals on, each fit is solved alone (_fit_batch)
 _REFINE_ROUNDS = 3  # an unconverged fit that matters gets up to this many more rounds of lm_steps (_Search.refine)
+_NOISE_Z = 2.0  # stop rule: no effect is added once χ² − dof ≤ _NOISE_Z · √(2 dof)
+_AMBIGUOUS_BIC = 6.0  # a confusable runner-up within this ΔBIC of the winner is named too (Kass & Raftery: < 6)
+# effects whose signatures one capture may not tell apart: a lamp field follows image position, anisotropy the
+# half-vector azimuth, and across one capture's scanlines the two covary
+_CONFUSABLE = {"illumination_gradient": ("anisotropy",), "anisotropy": ("illumination_gradient",)}
 _REFINE_BIC = 0.5  # ... a runner-up matters if its ΔBIC (a lower bound) is at least this fraction of the winner's
 
 
@@ -88,6 +93,11 @@ def _lr_p(dchi2: float, e: Effect) -> float:
         lo = stats.chi2.sf(dchi2, k - 1) if k > 1 else 0.0
         return float(0.5 * lo + 0.5 * stats.chi2.sf(dchi2, k))
     return float(stats.chi2.sf(dchi2, k))
+
+
+def _within_noise(st: FitState) -> bool:
+    """The stop rule: the excess ``χ² − dof`` is within ``_NOISE_Z`` SDs (``√(2 dof)``) of what noise gives."""
+    return bool(st.chi2 - st.dof <= _NOISE_Z * math.sqrt(2.0 * st.dof))
 
 
 def _gap_p(chi2: float, dof: int) -> float:
@@ -470,6 +480,85 @@ def _unexplained_structure(search: _Search, cur: _View, partial: list[Candidate]
     return unexplained, structure
 
 
+class _Steps:
+    """The step loop's state: the current fit, the states so far, what was found, partial matches, ambiguities."""
+
+    def __init__(self, cur: _View):
+        self.cur = cur
+        self.states = [cur.state]
+        self.found: list[str] = []
+        self.steps: list[Step] = []
+        self.partial: list[Candidate] = []
+        self.ambiguous: list[tuple[str, str, float]] = []
+
+    def search(self, search, max_steps, alpha, min_explained, structure_p, stop_within_noise, sample) -> bool:
+        """Add effects until none is justified; True if it stopped because the gap is within the noise."""
+        testable = search.testable
+        for _ in range(max_steps):
+            cur = self.cur
+            if stop_within_noise and self.found and _within_noise(cur.state):
+                return True
+            remaining = [i for i in range(len(testable)) if i not in cur.state.active]
+            if not remaining:
+                break
+            ranked = _rank_candidates(search, cur, remaining)
+            if ranked is None:
+                break
+            cands, by_effect = ranked
+            win = cands[0]
+            if not (win.delta_bic > 0 and win.p_value * len(remaining) < alpha):
+                break
+            if win.explained < min_explained and win.gap_p_after < structure_p:
+                self.partial.append(win)
+                break
+            self.ambiguous += [
+                (win.effect, c.effect, win.delta_bic - c.delta_bic)
+                for c in cands[1:]
+                if c.effect in _CONFUSABLE.get(win.effect, ())
+                and c.delta_bic > 0
+                and win.delta_bic - c.delta_bic < _AMBIGUOUS_BIC
+            ]
+            i_win = next(i for i in remaining if testable[i].name == win.effect)
+            new = search.residual_view(by_effect[i_win])
+            self.steps.append(_make_step(testable[i_win], win, cands, cur, new, sample))
+            self.found.append(testable[i_win].name)
+            self.cur = new
+            self.states.append(new.state)
+        return False
+
+
+def _with_texture(data, cur: _View):
+    """``data`` with the texture carried as a Gaussian process, and a summary; ``None`` if none is found.
+
+    The white noise is re-estimated jointly with the texture from the
+    baseline's residuals (the lag-1 estimate counted texture as noise).
+    """
+    import dataclasses
+
+    from ._texture import estimate_texture, texture_whitening
+
+    if getattr(data, "kind", None) not in ("ratio", "brdf") or data.y.shape[1] < 8:
+        return None
+    pred = cur.pred
+    y, m = np.asarray(data.y), np.asarray(data.mask)
+    exact = m if data.censored is None else m & ~np.asarray(data.censored)
+    # measured off the highlight only (prediction within 15 % of the scanline's diffuse floor), so that a
+    # lobe-shaped misfit of the baseline is not taken for texture
+    floor = np.nanquantile(np.where(m, pred, np.nan), 0.1, axis=1, keepdims=True)
+    fit = estimate_texture(y - pred, pred, exact, off=pred <= 1.15 * floor)
+    if not fit.significant().any():
+        return None
+    sigma = np.where(m, fit.sigma(pred), 1.0)
+    W = texture_whitening(fit, sigma, exact)
+    new = dataclasses.replace(data, sigma=sigma, whiten=W)
+    mean_level = np.array([np.mean(pred[..., c][m[..., c]]) for c in range(y.shape[-1])])
+    summary = {
+        "amplitude": [float(v) for v in np.sqrt(fit.T) / np.maximum(mean_level, 1e-30)],
+        "rho": [float(v) for v in fit.rho],
+    }
+    return new, summary
+
+
 def discover(
     model,
     data,
@@ -483,6 +572,8 @@ def discover(
     chunk: int = 64,
     keep_plot_data: bool = True,
     seed: int = 0,
+    texture: bool = False,
+    stop_within_noise: bool = True,
 ) -> DiscoveryReport:
     """Find, name and add the effects the data need beyond ``model``.
 
@@ -515,6 +606,18 @@ def discover(
         Keep residuals and covariates (≤ 20,000 points) for the plots.
     seed
         Seeds the subsample kept for plots.
+    stop_within_noise
+        Stop rule: once an effect has closed the gap to within what noise
+        alone gives, ``χ² − dof ≤ 2 √(2 dof)`` (two SDs of χ² under the noise
+        model), nothing further is added and the report says "nothing further
+        needed". The first effect is judged by its own evidence (ΔBIC and the
+        LR test), which is more powerful than the gap: a γ mismatch that ρd,
+        ρs and α absorb to Δχ² ≈ 30 leaves a baseline gap within the noise
+        and is still named.
+    texture
+        Carry the probe's ρd texture in the model as a Gaussian process whose
+        autocovariance is estimated from the baseline's residuals
+        (:mod:`wardjax.effects._texture`), where it is significant.
 
     Returns
     -------
@@ -528,35 +631,19 @@ def discover(
     testable, skipped = _split_library(model, data, effects)
     search = _Search(model, data, testable, lm_steps, chunk)
     cur = search.residual_view(_fit_baseline(search))
+    tex = None
+    if texture and model.kind == "scanline":
+        textured = _with_texture(data, cur)
+        if textured is not None:
+            data, tex = textured
+            search = _Search(model, data, testable, lm_steps, chunk)
+            cur = search.residual_view(_fit_baseline(search))
     sample = None
     if keep_plot_data:
         sample = _plot_sampler(search.mask, int(search.mask.sum()) if search.mask is not None else cur.r.size, seed)
-    states = [cur.state]
-    found: list[str] = []
-    steps: list[Step] = []
-    partial: list[Candidate] = []
-    for _ in range(max_steps):
-        remaining = [i for i in range(len(testable)) if i not in cur.state.active]
-        if not remaining:
-            break
-        ranked = _rank_candidates(search, cur, remaining)
-        if ranked is None:
-            break
-        cands, by_effect = ranked
-        win = cands[0]
-        justified = win.delta_bic > 0 and win.p_value * len(remaining) < alpha
-        if not justified:
-            break
-        if win.explained < min_explained and win.gap_p_after < structure_p:
-            partial.append(win)
-            break
-        i_win = next(i for i in remaining if testable[i].name == win.effect)
-        new = search.residual_view(by_effect[i_win])
-        steps.append(_make_step(testable[i_win], win, cands, cur, new, sample))
-        found.append(testable[i_win].name)
-        cur = new
-        states.append(cur.state)
-
+    run = _Steps(cur)
+    stopped = run.search(search, max_steps, alpha, min_explained, structure_p, stop_within_noise, sample)
+    cur, states, found, steps, partial = run.cur, run.states, run.found, run.steps, run.partial
     unexplained, structure = _unexplained_structure(search, cur, partial, structure_p)
     return DiscoveryReport(
         model=getattr(model, "title", type(model).__name__),
@@ -575,5 +662,14 @@ def discover(
         partial=[c.effect for c in partial],
         tested=[e.name for e in testable],
         seconds=time.perf_counter() - t0,
-        settings={"alpha": alpha, "min_explained": min_explained, "max_steps": max_steps, "criterion": "BIC+LR"},
+        ambiguous=run.ambiguous,
+        settings={
+            "alpha": alpha,
+            "min_explained": min_explained,
+            "max_steps": max_steps,
+            "criterion": "BIC+LR",
+            "texture": tex,
+            "stop_rule": f"χ² − dof ≤ {_NOISE_Z:g}·√(2 dof)" if stop_within_noise else None,
+            "stopped_within_noise": stopped,
+        },
     )

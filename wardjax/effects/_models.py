@@ -78,6 +78,11 @@ class ScanlineData(eqx.Module):
         the sensor reports). The saturation effect fits these with the
         censored likelihood; without the flags it finds clipped values as a
         plateau of tied maxima.
+    whiten
+        ``(S, C, N, N)`` or ``None``: lower-triangular ``L⁻¹`` that whitens the
+        residuals along each scanline when the probe's ρd texture is carried
+        in the model as a Gaussian process (:mod:`wardjax.effects._texture`);
+        ``None``: white noise.
     """
 
     y: np.ndarray
@@ -87,6 +92,7 @@ class ScanlineData(eqx.Module):
     wo: np.ndarray
     cov: dict
     censored: np.ndarray | None = None
+    whiten: np.ndarray | None = None
     kind: str = eqx.field(static=True, default="ratio")
     f_std: float = eqx.field(static=True, default=0.99 / np.pi)
     available: tuple = eqx.field(static=True, default=())
@@ -256,6 +262,11 @@ def _lobe(ctx, ax, ay, phi):
     return ctx["g"] * jnp.exp(-e) / (ax * ay)
 
 
+def _whiten(W, z):
+    """``L⁻¹ z`` along each scanline and channel: ``W`` ``(S, C, N, N)``, ``z`` ``(S, N, C)``."""
+    return jnp.einsum("scij,sjc->sic", W, z)
+
+
 @dataclasses.dataclass(frozen=True)
 class ScanlineModel:
     """Isotropic Ward on scanlines with ρd per scanline and channel (see module docstring).
@@ -357,16 +368,28 @@ class ScanlineModel:
             for e in effects:
                 cens = cens | e.censored(active[e.name], data)
         # ρd from the uncensored values (a censored value only bounds it)
-        w = jnp.where(data.mask & ~cens, 1.0 / (sp * sp), 0.0)
-        sw = jnp.sum(w, axis=1, keepdims=True)
-        rho = jnp.pi * jnp.sum(w * (yp - term), axis=1, keepdims=True) / jnp.maximum(sw, _TINY)
+        use = data.mask & ~cens
+        if data.whiten is None:
+            w = jnp.where(use, 1.0 / (sp * sp), 0.0)
+            sw = jnp.sum(w, axis=1, keepdims=True)
+            rho = jnp.pi * jnp.sum(w * (yp - term), axis=1, keepdims=True) / jnp.maximum(sw, _TINY)
+        else:  # generalised least squares under the texture's covariance
+            a = _whiten(data.whiten, jnp.where(use, 1.0 / sp, 0.0))
+            b = _whiten(data.whiten, jnp.where(use, (yp - term) / sp, 0.0))
+            rho = (
+                jnp.pi
+                * jnp.sum(a * b, axis=1, keepdims=True)
+                / jnp.maximum(jnp.sum(a * a, axis=1, keepdims=True), _TINY)
+            )
         f = rho / jnp.pi + term
         # the deviance is exact, in the measured space: ρd above is the closed-form profile
         # of the linearised problem (close to, never better than, the exact optimum), so a
         # measurement effect cannot lower χ² by stretching the propagated noise
         for e in effects:
             f = e.measure(vals[e.name], f, ctx)
-        z = (data.y - f) / data.sigma
+        z = jnp.where(data.mask, (data.y - f) / data.sigma, 0.0)
+        if data.whiten is not None:  # decoupled (identity) rows where a value is flagged clipped or masked
+            z = _whiten(data.whiten, z)
         if censoring:
             # a censored value says only "true value ≥ y": P = Φ((f − y)/σ)
             t = jnp.where(cens, -z, 0.0)

@@ -158,6 +158,11 @@ class DiscoveryReport:
         Effects strongly supported but explaining too little to be named.
     baseline, final
         The fitted baseline and final models (:class:`FitState`).
+    ambiguous
+        ``(named, other, ΔBIC difference)`` where an effect with a different
+        signature explained the step almost as well (illumination
+        non-uniformity against anisotropy): one capture cannot tell them
+        apart, and both are named.
     """
 
     model: str
@@ -177,6 +182,7 @@ class DiscoveryReport:
     tested: list
     seconds: float
     settings: dict
+    ambiguous: list = dataclasses.field(default_factory=list)
 
     # ---------------------------------------------------------------- summaries
     @property
@@ -184,7 +190,17 @@ class DiscoveryReport:
         """True when no unexplained structure remains."""
         return not self.unexplained
 
+    @property
+    def within_noise(self) -> bool:
+        """The search stopped because the gap is within what noise alone gives (``settings["stop_rule"]``)."""
+        return bool(self.settings.get("stopped_within_noise", False))
+
     def verdict(self) -> str:
+        if self.within_noise:
+            what = f"found {', '.join(self.found)}" if self.found else "nothing missing"
+            if self.ambiguous:
+                what += "".join(f" (or {b}: not told apart)" for _, b, _ in self.ambiguous)
+            return f"{what}; the gap is within the noise: nothing further needed"
         if self.found and self.explained:
             return f"found {', '.join(self.found)}; the residuals are now consistent with the noise"
         if self.found:
@@ -232,6 +248,7 @@ class DiscoveryReport:
             },
             "unexplained": list(self.unexplained),
             "partial": list(self.partial),
+            "ambiguous": [{"named": a, "or": b, "delta_bic_difference": _num(d)} for a, b, d in self.ambiguous],
             "not_detectable": [{"effect": n, "reason": w} for n, w in self.not_detectable],
             "not_testable": [{"effect": n, "reason": w} for n, w in self.not_testable],
             "tested": list(self.tested),
@@ -283,6 +300,13 @@ class DiscoveryReport:
                 )
             if s.effect in figures:
                 L.append(f"\n![residuals against {s.plot['covariate'] if s.plot else ''}]({figures[s.effect]})\n")
+        if self.ambiguous:
+            L.append("\n## Not told apart\n")
+            L.extend(
+                f"- {a} or {b}: ΔBIC differs by {d:.1f} only; one capture cannot tell them apart (a second "
+                "capture with the probe turned by 90° would: anisotropy turns with it, the illumination does not)"
+                for a, b, d in self.ambiguous
+            )
         L.append("\n## Unexplained structure\n")
         L.append(
             "\n".join(f"- {u}" for u in self.unexplained)

@@ -587,7 +587,13 @@ def texture_synthesize(model_path: Path, size: str, seed: int, iterations: int, 
     show_default=True,
     help="Bin the probe to at most this many pixels per channel.",
 )
-def diagnose_cmd(capture: Path, out_dir: Path, max_steps: int, max_samples: int) -> None:
+@click.option(
+    "--texture/--no-texture",
+    default=False,
+    show_default=True,
+    help="Carry the probe's ρd texture in the model (a Gaussian process with its measured autocovariance).",
+)
+def diagnose_cmd(capture: Path, out_dir: Path, max_steps: int, max_samples: int, texture: bool) -> None:
     """Find the effects a capture needs beyond the Ward model: report.json, report.md, residual plots."""
     from ..capture import CAPTURE_FILE, Capture, CaptureError, load_capture
     from ..effects import ScanlineModel, discover
@@ -601,7 +607,7 @@ def diagnose_cmd(capture: Path, out_dir: Path, max_steps: int, max_samples: int)
         if not isinstance(cap, Capture):
             raise CaptureError(CAPTURE_FILE, "method", f"diagnose reads method = 'scanline', got {cap.method!r}")
         data = capture_data(cap, max_samples=max_samples)
-        rep = discover(ScanlineModel(cap.config.fit.normalization), data, max_steps=max_steps)
+        rep = discover(ScanlineModel(cap.config.fit.normalization), data, max_steps=max_steps, texture=texture)
         rep.save(out_dir, extra={"capture": cap.name})
     except (CaptureError, ValueError, OSError) as exc:
         _fail(str(exc).splitlines()[0])
