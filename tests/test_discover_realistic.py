@@ -2,9 +2,8 @@
 
 import math
 
-import pytest
-
 import numpy as np
+import pytest
 
 import wardjax as wj
 from wardjax.effects import ScanlineModel, discover
