@@ -244,8 +244,8 @@ def synthesize_texture(
         )
     if isinstance(iterations, bool) or not isinstance(iterations, (int, np.integer)) or iterations < 1:
         raise ValueError(f"iterations={iterations!r}, expected an integer >= 1")
-    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)):
-        raise ValueError(f"seed={seed!r}, expected an integer")
+    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
+        raise ValueError(f"seed={seed!r}, expected an integer >= 0")
     if sort not in ("auto", "numpy", "xla"):
         raise ValueError(f"sort={sort!r}, expected 'auto', 'numpy' or 'xla'")
     c = model.channels
