@@ -39,7 +39,7 @@ from hypothesis import strategies as st
 from hypothesis.database import DirectoryBasedExampleDatabase
 
 import wardjax as wj
-from wardjax.capture import CaptureError, check_focal_px, load_capture
+from wardjax.capture import CaptureError, check_focal_px, load_capture, one_line
 from wardjax.capture._rules import MAX_DISTANCE_MM
 from wardjax.capture._setup import load_display
 from wardjax.texture import TextureModel
@@ -57,7 +57,7 @@ def slow(n: int):
     return settings(max_examples=n, database=_DB, **_COMMON)
 
 
-def one_line(text: str) -> bool:
+def is_one_line(text: str) -> bool:
     return len(text.splitlines()) == 1 and not any(b in text for b in BAD_TEXT)
 
 
@@ -303,7 +303,7 @@ def _load_or_refuse(folder: Path) -> None:
         cap = load_capture(folder)
     except CaptureError as e:
         text = str(e)
-        assert one_line(text), repr(text)
+        assert is_one_line(text), repr(text)
         assert e.file and text.startswith(e.file), text
     else:
         _rules_hold(cap)
@@ -555,7 +555,7 @@ def _texture(work, spec) -> None:
     try:
         model = TextureModel.load(path)
     except ValueError as e:
-        assert one_line(str(e)) and str(e).startswith(str(path)), repr(str(e))
+        assert is_one_line(str(e)) and str(e).startswith(str(path)), repr(str(e))
     else:
         assert np.all((model.rho_s >= 0) & (model.rho_s < 1)), model.rho_s
         assert 0 <= model.region[0] < model.region[1] <= model.source_shape[0], model.region
@@ -673,11 +673,13 @@ def _cli(work, spec) -> None:
     lines = [ln for ln in text.splitlines() if ln.strip()]
     assert res.exit_code == 2, (argv, res.exit_code, text)
     assert 1 <= len(lines) <= 2 and lines[0].startswith("error: "), (argv, text)
-    assert one_line(lines[0]), (argv, text)
+    assert is_one_line(lines[0]), (argv, text)
     line, quoted = lines[0], re.findall(r"'([^']*)'", lines[0])
-    named = any(len(t) > 1 and t in line for t in argv) or any(q in t for q in quoted for t in argv)
+    shown = argv + [one_line(t) for t in argv]  # as typed, or with control characters escaped
+    named = any((len(t) > 1 and t in line) or line.startswith(f"error: {t}: ") for t in shown)
+    named = named or any(q in t for q in quoted for t in shown)
     named = named or re.search(
-        r"'[A-Z_]+'|--[a-z-]+|Missing command|No such command", line
+        r"'[A-Z_]+'|--[a-z-]+|Missing command|No such command|capture\.toml", line
     )  # a missing argument, option, command
     assert named, (argv, lines[0])
 
@@ -686,6 +688,8 @@ def _cli(work, spec) -> None:
 @example(spec=("", []))  # `wardjax` alone: the help, not "error: Usage: …" over 17 lines
 @example(spec=("demo", [(None, ["\x85"])]))  # a line break in an argument echoed
 @example(spec=("texture synthesize", [(1, ["-1"])]))  # --seed -1: numpy's "expected non-negative integer"
+@example(spec=("diagnose", [(None, ["0"])]))  # a one-character path, named first
+@example(spec=("diagnose", [(None, ["a:b:"])]))  # rich printed the path "a:b:" as "a🅱"
 @settings(QUICK, max_examples=60)
 def test_cli_arguments_quick(work, spec):
     _cli(work, spec)

@@ -16,7 +16,8 @@ from rich.markup import escape
 
 __all__ = ["main"]
 
-console = Console()
+# emoji=False: a path or a value such as ``a:b:`` is printed as typed, not with ``:b:`` turned into an emoji.
+console = Console(emoji=False)
 
 # Where the traceback of a failure the code did not foresee is kept (the user sees one line naming it).
 ERROR_LOG_NAME = "error.log"
@@ -138,7 +139,9 @@ def _fail(message: str, code: int = 2) -> None:
     message is escaped so that text like ``[y0, y1, x0, x1]`` is not read as
     rich markup.
     """
-    Console(stderr=True, soft_wrap=True).print(f"[bold red]error:[/] {escape(_one_line(message))}", highlight=False)
+    Console(stderr=True, soft_wrap=True, emoji=False).print(
+        f"[bold red]error:[/] {escape(_one_line(message))}", highlight=False
+    )
     sys.exit(code)
 
 
@@ -269,7 +272,7 @@ def fit_cmd(paths: tuple[Path, ...], out_dir: Path, force: bool, quiet: bool) ->
 
     from ._batch import run_batch, scanline_note
 
-    err = Console(stderr=True)
+    err = Console(stderr=True, emoji=False)
     missing = [str(p) for p in paths if not p.exists()]
     if missing:
         _fail(f"{missing[0]}: no such capture folder")
@@ -543,7 +546,7 @@ def texture_synthesize(model_path: Path, size: str, seed: int, iterations: int, 
             BarColumn(),
             MofNCompleteColumn(),
             TimeElapsedColumn(),
-            console=Console(stderr=True),
+            console=Console(stderr=True, emoji=False),
             transient=True,
         ) as bar:
             task = bar.add_task("", total=iterations)
