@@ -277,10 +277,6 @@ def read_image(path, *, rgb: bool = True) -> np.ndarray:
 
 
 def _decode(path: Path, suffix: str, data: bytes | None) -> np.ndarray:
-    if suffix in (".tif", ".tiff"):
-        import tifffile
-
-        return np.asarray(tifffile.imread(io.BytesIO(data)))
     if data is None:
         import rawpy
 
@@ -288,6 +284,10 @@ def _decode(path: Path, suffix: str, data: bytes | None) -> np.ndarray:
             return raw.postprocess(
                 gamma=(1, 1), no_auto_bright=True, output_bps=16, use_camera_wb=True, output_color=rawpy.ColorSpace.sRGB
             )
+    if suffix in (".tif", ".tiff"):
+        import tifffile
+
+        return np.asarray(tifffile.imread(io.BytesIO(data)))
     if suffix == ".png":
         import imagecodecs  # Pillow (imageio's default) reduces 16-bit RGB PNG to 8 bits
 

@@ -168,7 +168,8 @@ def load_capture(path) -> Capture | SmartphoneCapture:
         focal_px=(cfg.camera.focal_px, cfg.camera.focal_px_y or cfg.camera.focal_px),
         image_size=cfg.camera.image_size,
         principal_point=cfg.camera.principal_point,
-        up=unit_direction(cfg.camera.up),  # a huge or tiny hint made unit: the camera's axes stay finite
+        # a huge or tiny hint made unit, so that the camera's axes stay finite (3 values in, 3 out)
+        up=unit_direction(cfg.camera.up),  # pyright: ignore[reportArgumentType]
     )
     rig = Rig(lamp=cfg.rig.lamp, camera=cam, probe=cfg.regions.probe, standard=cfg.regions.standard)
     name = cfg.name or folder.resolve().name
