@@ -4,7 +4,7 @@ VENV   ?= .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 
-.PHONY: install demo test test-slow lint docs notebooks bench clean
+.PHONY: install demo test test-slow lint docs notebooks bench bench-gpu clean
 
 install: $(STAMP)
 
@@ -42,6 +42,10 @@ notebooks: install
 
 bench: install
 	$(PY) -m benchmarks
+
+# Engine and texture benchmarks on a GPU (fits/s, evaluations/s, synthesis time); skips without one.
+bench-gpu: install
+	$(PY) -m benchmarks.gpu
 
 clean:
 	rm -rf $(VENV) demo-output .pytest_cache site

@@ -383,13 +383,19 @@ def test_float32_cancellation_is_flagged_and_refit_in_float64():
     data = F_data.validate(z["f_r"], z["wi"], z["wo"], None, w)
     raw = F._solve(data, iso=True, normalization="ward1992", solver="fast", dtype=np.dtype(np.float32), chunk=1024)
     collapsed = np.abs(raw.alpha[:, 0] / z["alpha"] - 1) > 0.5
-    assert collapsed.sum() >= 25  # the float32 kernel alone does fall into it here
+    if jax.default_backend() == "cpu":
+        # These scanlines were found with XLA's CPU float32 rounding; another backend (a GPU's fused
+        # multiply-adds) rounds differently and may not fall into it, and what follows must hold anyway.
+        assert collapsed.sum() >= 25  # the float32 kernel alone does fall into it here
     assert not np.any(collapsed & (raw.status == wj.Status.CONVERGED))
     res = wj.fit_scanlines(z["f_r"], z["wi"], z["wo"], weights=w, dtype=np.float32)
     assert np.all(res.ok)
     assert np.max(np.abs(res.params.alpha_x / z["alpha"] - 1)) < 0.1
     ref = wj.fit_scanlines(z["f_r"], z["wi"], z["wo"], weights=w)
-    np.testing.assert_allclose(res.params.alpha_x, ref.params.alpha_x, rtol=1e-12)
+    # Refitted in float64: float64's result to the last digits; certified in float32: float32's accuracy.
+    redo = np.isin(raw.status, (wj.Status.MAX_STEPS, wj.Status.NONFINITE))
+    np.testing.assert_allclose(res.params.alpha_x[redo], ref.params.alpha_x[redo], rtol=1e-12)
+    np.testing.assert_allclose(res.params.alpha_x[~redo], ref.params.alpha_x[~redo], rtol=1e-4)
 
 
 @pytest.mark.parametrize("n", [5, 59, 64, 127, 128, 200, 1000, 4097])

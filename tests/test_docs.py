@@ -23,7 +23,7 @@ def site(tmp_path_factory):
     env = {**os.environ, "NO_MKDOCS_2_WARNING": "1"}
     mkdocs = str(Path(sys.executable).parent / "mkdocs")
     res = subprocess.run(
-        [mkdocs, "build", "--strict", "-q", "-d", str(out)],
+        [mkdocs, "build", "--strict", "-d", str(out)],  # not -q: quiet hides the warnings strict counts
         cwd=ROOT,
         env=env,
         capture_output=True,
@@ -84,9 +84,10 @@ def test_stage_packages_list_their_reexports_in_all():
 
 
 def test_method_pages_and_notebooks_are_in_the_site(site):
-    for page in ("cli", "image-based", "smartphone", "engine", "texture", "missing-effects", "layout", "benchmarks"):
+    pages = ("cli", "image-based", "smartphone", "engine", "texture", "missing-effects", "rendering", "layout")
+    for page in (*pages, "benchmarks"):
         assert (site / page / "index.html").is_file(), page
-    for nb in ("alpha_uncertainty", "missing_effects", "fit_folder", "texture"):
+    for nb in ("alpha_uncertainty", "missing_effects", "fit_folder", "texture", "validation"):
         assert (site / "notebooks" / nb / "index.html").is_file(), nb
 
 

@@ -603,7 +603,7 @@ OPTIONS = {
     "simulate": ["--material", "--rho-d", "--rho-s", "--alpha-x", "--alpha-y", "--texture", "--encoding"]
     + ["--bit-depth", "--format", "--size", "--seed", "--renderer", "--force"],
     "texture analyze": ["-o", "--out", "--region", "--height", "--quantiles", "--rho-s"],
-    "texture synthesize": ["--size", "--seed", "--iterations", "-o", "--out"],
+    "texture synthesize": ["--size", "--seed", "--iterations", "--match", "-o", "--out"],
     "diagnose": ["--out", "--max-steps", "--max-samples"],
     "report": ["-o", "--out"],
     "gratings": ["--display", "--viewing", "--out", "--orientation"],

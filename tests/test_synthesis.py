@@ -304,20 +304,26 @@ def _seam_ratio(img):
     return seam / interior
 
 
+MATCHES = ("binned", "exact")
+
+
 @pytest.fixture(scope="module")
 def synthesised():
+    """Each texture synthesised with Heeger & Bergen's binned matching (the default) and with the exact one."""
     out = {}
     for kind in KINDS:
         src = procedural_texture(kind, SRC, seed=1, rho_s=0.04)
         model = wj.analyze_texture(src, rho_s=0.04)
-        out[kind] = (src, model, wj.synthesize_texture(model, OUT, seed=0))
+        for match in MATCHES:
+            out[kind, match] = (src, model, wj.synthesize_texture(model, OUT, seed=0, match=match))
     return out
 
 
+@pytest.mark.parametrize("match", MATCHES)
 @pytest.mark.parametrize("kind", KINDS)
-def test_05_subband_distributions_match_source(synthesised, kind):
+def test_05_subband_distributions_match_source(synthesised, kind, match):
     """Every subband of every decorrelated channel: two-sample KS(source, synthesis) ≤ 0.05."""
-    src, model, res = synthesised[kind]
+    src, model, res = synthesised[kind, match]
     p, _ = wj.periodic_smooth_decomposition(_decorrelated(src, model))
     ps = wj.build_steerable_pyramid(p, model.height).subbands()
     po = wj.build_steerable_pyramid(_decorrelated(res.image, model), model.height).subbands()
@@ -330,18 +336,20 @@ def test_05_subband_distributions_match_source(synthesised, kind):
     assert res.distance.shape == (5,) and res.distance[-1] < res.distance[0] < res.initial_distance
 
 
+@pytest.mark.parametrize("match", MATCHES)
 @pytest.mark.parametrize("kind", KINDS)
-def test_05_mean_variance_and_range(synthesised, kind):
-    src, model, res = synthesised[kind]
+def test_05_mean_variance_and_range(synthesised, kind, match):
+    src, model, res = synthesised[kind, match]
     assert res.image.shape == (*OUT, 3) and res.image.dtype == np.float32
     np.testing.assert_allclose(res.image.mean(axis=(0, 1)), src.mean(axis=(0, 1)), rtol=0.02)
     np.testing.assert_allclose(res.image.var(axis=(0, 1)), src.var(axis=(0, 1)), rtol=0.02)
     assert res.image.min() >= 0.0 and res.image.max() <= 1.0 - 0.04
 
 
+@pytest.mark.parametrize("match", MATCHES)
 @pytest.mark.parametrize("kind", KINDS)
-def test_05_output_tiles_seamlessly(synthesised, kind):
-    src, _, res = synthesised[kind]
+def test_05_output_tiles_seamlessly(synthesised, kind, match):
+    src, _, res = synthesised[kind, match]
     assert abs(_seam_ratio(res.image) - 1.0) <= 0.10
     # The (non-periodic) source fails the same criterion: the statistic discriminates.
     assert _seam_ratio(src) > 1.2
@@ -360,7 +368,8 @@ def test_05_synthesis_is_deterministic_and_clamps(tiny_model):
     assert not np.array_equal(a.image, c.image)
     # XLA's sort gives the same permutation as NumPy's: the result does not depend on the backend.
     np.testing.assert_array_equal(
-        wj.synthesize_texture(tiny_model, (24, 40), seed=7, iterations=2, sort="xla").image, a.image
+        wj.synthesize_texture(tiny_model, (24, 40), seed=7, iterations=2, match="exact", sort="xla").image,
+        wj.synthesize_texture(tiny_model, (24, 40), seed=7, iterations=2, match="exact").image,
     )
     clamped = wj.synthesize_texture(tiny_model, (24, 40), seed=7, iterations=2, rho_s=0.3)
     assert clamped.image.max() <= 0.7 and np.isclose(clamped.image.max(), 0.7)
@@ -368,6 +377,52 @@ def test_05_synthesis_is_deterministic_and_clamps(tiny_model):
         wj.synthesize_texture(tiny_model, (12, 128))
     with pytest.raises(ValueError, match=r"iterations=0"):
         wj.synthesize_texture(tiny_model, (24, 40), iterations=0)
+    with pytest.raises(ValueError, match=r"match='sorted', expected 'binned' or 'exact'"):
+        wj.synthesize_texture(tiny_model, (24, 40), match="sorted")
+
+
+def test_05_same_seed_gives_the_same_bits_at_a_threaded_size():
+    """Analysis and synthesis are bit-reproducible where XLA would split FFTs and sums over threads.
+
+    At 512² XLA's CPU backend runs FFTs and reductions on its thread pool, and
+    two runs with the same seed differed in most pixels; the texture programs are
+    compiled single-threaded (``wardjax.texture._jit``), so they are equal.
+    """
+    src = procedural_texture("marble", (512, 512), seed=3, rho_s=0.04)
+    a, b = (wj.analyze_texture(src, rho_s=0.04) for _ in range(2))
+    np.testing.assert_array_equal(a.band_quantiles, b.band_quantiles)
+    np.testing.assert_array_equal(a.pixel_quantiles, b.pixel_quantiles)
+    x, y = (wj.synthesize_texture(a, (512, 512), seed=2, iterations=2) for _ in range(2))
+    np.testing.assert_array_equal(x.image, y.image)
+    np.testing.assert_array_equal(x.band_distance, y.band_distance)
+
+
+def test_03_binned_matching_reaches_the_target_distribution(rng):
+    """Heeger & Bergen's binned matching against SciPy's KS test: heavy-tailed input to a uniform target.
+
+    The output keeps the input's order, its histogram is the target's (one-sample
+    KS ≤ 1e-3 for 2²⁰ values), and the KS distance read from the bin counts is
+    SciPy's exact statistic of the input against the target, within the largest
+    bin's probability.
+    """
+    from scipy.stats import kstest, laplace, uniform
+
+    from wardjax.texture import _binned
+
+    n, probs = 1 << 20, quantile_probabilities(129)
+    x = rng.laplace(0.0, 1.0, (2, n)).astype(np.float32)
+    table = np.stack([uniform.ppf(probs, -1, 2), laplace.ppf(np.clip(probs, 1e-9, 1 - 1e-9), 0.5, 2.0)])
+    lookup = _binned.quantile_lookup(table, probs)
+    with jax.enable_x64(True):
+        out, ks = jax.jit(_binned._match_rows)(x, lookup, table.astype(np.float32), probs.astype(np.float32))
+    out, ks = np.asarray(out), np.asarray(ks)
+    order = np.argsort(x[0], kind="stable")
+    assert np.all(np.diff(out[0][order]) >= 0)
+    assert kstest(out[0], uniform(-1, 2).cdf).statistic < 1e-3
+    assert kstest(out[1], laplace(0.5, 2.0).cdf).statistic < 1e-3
+    exact = kstest(x[0], uniform(-1, 2).cdf).statistic
+    top = np.max(np.histogram(x[0], bins=_binned.BINS)[0]) / n
+    assert exact - top <= ks[0] <= exact + 1e-6
 
 
 def test_05_progress_reports_every_iteration(tiny_model):
@@ -441,7 +496,7 @@ def test_07_cli_analyze_and_synthesize(tmp_path):
     )
     assert r.exit_code == 0, r.output
     assert "rows 0:80, columns 8:96" in r.output and "largest valid rectangle" in r.output
-    for name in ("out.tif", "out.png"):
+    for name, match in (("out.tif", "binned"), ("out.png", "binned"), ("exact.tif", "exact")):
         r = runner.invoke(
             main,
             [
@@ -454,6 +509,8 @@ def test_07_cli_analyze_and_synthesize(tmp_path):
                 "0",
                 "--iterations",
                 "2",
+                "--match",
+                match,
                 "-o",
                 str(tmp_path / name),
             ],
@@ -462,6 +519,13 @@ def test_07_cli_analyze_and_synthesize(tmp_path):
         assert "wrote" in r.output
     lin = tifffile.imread(tmp_path / "out.tif")
     assert lin.shape == (64, 96, 3) and lin.dtype == np.float32 and lin.min() >= 0 and lin.max() <= 0.96
+    # --match reaches the library: the exact matching gives another image from the same seed, and the library's.
+    exact = tifffile.imread(tmp_path / "exact.tif")
+    assert not np.array_equal(exact, lin)
+    model = wj.TextureModel.load(tmp_path / "texture.json")
+    np.testing.assert_array_equal(
+        exact, wj.synthesize_texture(model, (64, 96), seed=0, iterations=2, match="exact").image
+    )
     import imageio.v3 as iio
 
     srgb = iio.imread(tmp_path / "out.png")

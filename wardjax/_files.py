@@ -309,12 +309,13 @@ def as_rgb(img: np.ndarray) -> np.ndarray:
     return img[..., :3]
 
 
-def write_image(path, array: np.ndarray) -> Path:
+def write_image(path, array: np.ndarray, *, tile: int | None = None) -> Path:
     """Write an image atomically, by suffix.
 
     ``.png``: 8- or 16-bit codes (imagecodecs); ``.tif``/``.tiff``: the array
-    as it is (float32 linear data or integer codes); ``.jpg``/``.jpeg``: 8-bit
-    codes, quality 95.
+    as it is (float32 linear data or integer codes), in ``tile × tile`` tiles
+    if ``tile`` is given (a multiple of 16); ``.jpg``/``.jpeg``: 8-bit codes,
+    quality 95.
     """
     path = Path(path)
     array = np.asarray(array)
@@ -328,7 +329,7 @@ def write_image(path, array: np.ndarray) -> Path:
 
         photometric = "rgb" if array.ndim == 3 and array.shape[-1] == 3 else "minisblack"
         with atomic_path(path) as tmp:
-            tifffile.imwrite(tmp, array, photometric=photometric)
+            tifffile.imwrite(tmp, array, photometric=photometric, tile=None if tile is None else (tile, tile))
     elif suffix in (".jpg", ".jpeg"):
         import imageio.v3 as iio
 

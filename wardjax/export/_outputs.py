@@ -27,6 +27,7 @@ OUTPUT_FILES = (
     "scanline.png",
     "material.rad",
     "scanlines.csv",
+    "residuals.npz",
     "texture.json",
     "params.json",
 )
@@ -61,6 +62,45 @@ def scanline_figure_png(fit) -> bytes:
     buf = io.BytesIO()
     fig.savefig(buf, format="png", metadata={"Software": None})
     return buf.getvalue()
+
+
+def _npz(**arrays) -> bytes:
+    """Arrays as the bytes of a compressed ``.npz`` (written through the one atomic writer)."""
+    buf = io.BytesIO()
+    np.savez_compressed(buf, **arrays)
+    return buf.getvalue()
+
+
+def residuals_npz(fit) -> bytes:
+    """``residuals.npz``: measured and fitted ``f_r`` over the image at the fit's binning (float32)."""
+    m = fit.fit_map
+    return _npz(
+        f_r=m["f_r"].astype(np.float32),
+        model=m["model"].astype(np.float32),
+        binning=np.int64(m["binning"]),
+        origin=np.asarray(m["origin"], np.int64),
+    )
+
+
+POSTERIOR_STEPS = 500  # at most this many steps per walker are kept in posterior.npz
+
+
+def posterior_npz(posterior) -> bytes:
+    """``posterior.npz``: the α posterior's chains, ``(steps, walkers)`` per named parameter (float32).
+
+    The chains are thinned to at most :data:`POSTERIOR_STEPS` steps per walker
+    (every ``thin``-th step, stored as ``thin``); enough for a corner plot and
+    a split-R̂ across walkers. τ and the effective sample size of the full chain
+    are in ``params.json`` (``fit.posterior``).
+    """
+    steps, walkers = int(posterior.n_steps), int(posterior.n_walkers)
+    thin = max(1, -(-steps // POSTERIOR_STEPS))
+    chains = {
+        k: np.asarray(v, np.float32).reshape(steps, walkers)[::thin]
+        for k, v in posterior.params.items()
+        if np.size(v) == steps * walkers
+    }
+    return _npz(**chains, thin=np.int64(thin))
 
 
 def _scanlines_csv(fit) -> bytes:
@@ -100,11 +140,19 @@ def _scanlines_csv(fit) -> bytes:
     return buf.getvalue().encode()
 
 
+# rho_d.tif is written in tiles of this side (tiled TIFF: readers fetch a region without the whole image).
+TIFF_TILE = 256
+# texture.json analyses at most this many pixels a side of the valid region (see analyze_texture's max_side).
+TEXTURE_MAX_SIDE = 2048
+
+
 def write_capture_outputs(fit, out_dir, *, created: str) -> dict:
     """Write every output of a fitted capture into ``out_dir``; ``params.json`` last.
 
     Files: ``rho_d.tif`` (float32 linear ρd, NaN where unusable), ``rho_d.png``
     (sRGB view), ``scanline.png``, ``material.rad``, ``scanlines.csv``,
+    ``residuals.npz`` (measured and fitted ``f_r`` over the image at the fit's
+    binning: ``f_r``, ``model``, ``binning``, ``origin``; see ``CaptureFit.fit_map``),
     ``texture.json`` (the parametric texture of section 4.2, when
     :mod:`wardjax.texture` can analyse the valid region) and ``params.json``.
     ``params.json`` is the completion mark: a capture whose ``params.json``
@@ -118,9 +166,11 @@ def write_capture_outputs(fit, out_dir, *, created: str) -> dict:
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     files = {}
-    write_image(out / "rho_d.tif", fit.rho_d.astype(np.float32))
+    rho_d = np.asarray(fit.rho_d, np.float32)  # no copy: fit_capture makes float32
+    write_image(out / "rho_d.tif", rho_d, tile=TIFF_TILE)
     files["texture"] = "rho_d.tif"
-    write_image(out / "rho_d.png", srgb8(fit.rho_d))
+    # The sRGB view band by band (elementwise; a whole float64 copy of a 50 MP image is 1.2 GB).
+    write_image(out / "rho_d.png", np.concatenate([srgb8(rho_d[r : r + 512]) for r in range(0, len(rho_d), 512)]))
     files["texture_preview"] = "rho_d.png"
     write_bytes_atomic(out / "scanline.png", scanline_figure_png(fit))
     files["scanline_plot"] = "scanline.png"
@@ -136,10 +186,12 @@ def write_capture_outputs(fit, out_dir, *, created: str) -> dict:
     files["radiance"] = "material.rad"
     write_bytes_atomic(out / "scanlines.csv", _scanlines_csv(fit))
     files["scanlines"] = "scanlines.csv"
+    write_bytes_atomic(out / "residuals.npz", residuals_npz(fit))
+    files["residuals"] = "residuals.npz"
     extra = {}
     # The parametric texture (image-based paper, section 4.2).
     try:
-        model = analyze_texture(fit.rho_d, rho_s=float(np.mean(fit.params.rho_s)))
+        model = analyze_texture(rho_d, rho_s=float(np.mean(fit.params.rho_s)), max_side=TEXTURE_MAX_SIDE)
         model.save(out / "texture.json")
         files["texture_model"] = "texture.json"
     except ValueError as e:  # e.g. the valid region is too small to analyse
@@ -160,7 +212,7 @@ def write_smartphone_outputs(
     inputs: dict,
     created: str,
 ) -> dict:
-    """Write a smartphone capture's ``material.rad`` and ``params.json`` (last) into ``out_dir``."""
+    """Write a smartphone capture's ``material.rad``, ``posterior.npz`` and ``params.json`` (last) into ``out_dir``."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     comment = (
@@ -170,6 +222,7 @@ def write_smartphone_outputs(
     )
     rad = radiance_material(params, name, tangent=(1.0, 0.0), anisotropic=False, comment=comment)
     write_bytes_atomic(out / "material.rad", rad.encode())
+    write_bytes_atomic(out / "posterior.npz", posterior_npz(posterior))
     doc = jsonable(
         smartphone_document(
             name=name,
@@ -177,7 +230,7 @@ def write_smartphone_outputs(
             stderr=stderr,
             posterior=posterior,
             rho_s_source=rho_s_source,
-            files={"radiance": "material.rad"},
+            files={"radiance": "material.rad", "posterior": "posterior.npz"},
             inputs=inputs,
             created=created,
         )

@@ -157,6 +157,10 @@ def smartphone_document(
                 "alpha_interval_95": [float(lo95), float(hi95)],
                 "autocorrelation_time": float(max(dict(post.tau).values())),  # the slowest parameter
                 "acceptance": float(np.mean(post.acceptance)),
+                # chain length and effective sample size, N·W/τ (emcee's integrated autocorrelation time)
+                "n_steps": int(post.n_steps),
+                "n_walkers": int(post.n_walkers),
+                "effective_samples": float(post.n_steps * post.n_walkers / max(dict(post.tau).values())),
             },
             "rho_s_source": rho_s_source,
         },

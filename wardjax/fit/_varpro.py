@@ -60,6 +60,9 @@ STEP_TOL_ABS = 1e-9
 DETECT_CHI2 = 25.0
 # α counts as resolved when its relative standard error is at most 1.
 MAX_REL_SIGMA = 1.0
+# The Gauss–Newton covariance is trusted where the profiled χ² one standard error
+# from the optimum rises by 1 ± CURVATURE_TOL residual variances, as a quadratic would.
+CURVATURE_TOL = 0.2
 
 
 class Stats(NamedTuple):
@@ -404,6 +407,7 @@ class ScanlineSolution(NamedTuple):
     chi2: Float[Array, ""]
     dof: Int[Array, ""]
     status: Int[Array, ""]
+    nonlinear: Int[Array, ""]  # 1 where the curvature check fails (:func:`curvature_check`)
 
 
 def _inv_small(a):
@@ -453,7 +457,48 @@ def covariance(theta, st: Stats, p: Prepared, scale):
     return cov * scale
 
 
-def solve_scanline(p: Prepared, *, iso: bool, rtol: float) -> ScanlineSolution:
+def curvature_check(theta, st: Stats, p: Prepared, cov, scale):
+    """Is the Gauss–Newton covariance trustworthy here? ``1`` where it is not (isotropic fits).
+
+    The covariance predicts that moving one standard error from the optimum raises
+    the profiled χ² by one residual variance. Checked four ways, each one evaluation
+    of :func:`stats` without derivatives:
+
+    * α: ``Δχ²(θ̂ ± σ_θ) / (χ²/dof)``, exact profile over ρd and ρs (variable projection);
+    * ρs: ``χ²(θ̂ + β δ, ŝ ± σ_s)`` along the covariance's conditional line
+      ``β = cov(ρs, α) / (α var ρs)`` with ``δ = ±σ_s`` (``χ²(θ, s) = K₀ − 2 s ⟨b̃, f̃⟩ +
+      s² ⟨b̃, b̃⟩`` for any ``s``): an upper bound of the profile there.
+
+    The check fails when any of the four lies outside ``1 ± CURVATURE_TOL`` (widened by
+    the rounding allowance ``64 ε K₀ / (χ²/dof)``, which matters in float32 only): the
+    likelihood is not quadratic over one standard error (a lobe spanning few samples,
+    a weakly detected lobe), and :func:`wardjax.fit._profile.profile_errors` replaces the
+    standard errors of ρs and α by profile-likelihood ones.
+    """
+    alpha = jnp.exp(theta[0])
+    var_s, var_a, cov_sa = cov[3, 3], cov[4, 4], cov[3, 4]
+    scale = jnp.where(scale > 0, scale, 1.0)
+    sd_t = jnp.sqrt(jnp.abs(var_a)) / alpha
+    sd_s = jnp.sqrt(jnp.abs(var_s))
+    beta = cov_sa / jnp.where(var_s > 0, var_s, 1.0) / alpha
+    rises = []
+    for sign in (1.0, -1.0):
+        st_a = stats(theta + sign * sd_t, p, True, with_jac=False)
+        rises.append((st_a.chi2 - st.chi2) / scale)
+        ds = sign * sd_s
+        st_s = stats(theta + beta * ds, p, True, with_jac=False)
+        s_new = jnp.maximum(st.s + ds, 0.0)
+        chi = p.k0 - 2.0 * s_new * st_s.sbf + s_new * s_new * st_s.sbb
+        rises.append((chi - st.chi2) / scale)
+    rises = jnp.stack(rises)
+    # χ² differences round at ε K₀ (the centred sums cancel): no verdict below that. In
+    # float64 this is far below the tolerance; in float32 it lets high-signal fits pass.
+    rounding = 64.0 * jnp.finfo(scale.dtype).eps * p.k0 / scale
+    bad = jnp.any(~(jnp.abs(rises - 1.0) <= CURVATURE_TOL + rounding))
+    return bad.astype(jnp.int32)
+
+
+def solve_scanline(p: Prepared, *, iso: bool, rtol: float, check: bool = True) -> ScanlineSolution:
     """Search and statistics of one prepared scanline (stage B, vmapped over a chunk)."""
     theta = grid_start(p)
     if iso:
@@ -511,7 +556,9 @@ def solve_scanline(p: Prepared, *, iso: bool, rtol: float) -> ScanlineSolution:
             jnp.where(at_bound, Status.AT_BOUND, jnp.where(small, Status.CONVERGED, Status.MAX_STEPS)),
         ),
     )
-    return ScanlineSolution(rho_d, s, jnp.exp(theta), cov, st.chi2, dof, status.astype(jnp.int32))
+    nonlinear = curvature_check(theta, st, p, cov, scale) if iso and check else jnp.zeros((), jnp.int32)
+    nonlinear = jnp.where(status == Status.CONVERGED, nonlinear, 0)
+    return ScanlineSolution(rho_d, s, jnp.exp(theta), cov, st.chi2, dof, status.astype(jnp.int32), nonlinear)
 
 
 __all__ = ["Prepared", "ScanlineSolution", "prepare", "solve_scanline"]

@@ -2,9 +2,14 @@
 
 from ._band import Reconstruction as Reconstruction
 from ._band import reconstruct_capture as reconstruct_capture
+from ._band import BandSetup as BandSetup
+from ._band import prepare_bands as prepare_bands
+from ._band import reconstruct_bands as reconstruct_bands
 from ._bins import MIN_SCANLINE_SAMPLES as MIN_SCANLINE_SAMPLES
 from ._bins import ScanlineBins as ScanlineBins
 from ._bins import bin_scanlines as bin_scanlines
+from ._bins import ScanlineBinner as ScanlineBinner
+from ._bins import bin_layout as bin_layout
 from ._reference import MaskReason as MaskReason
 from ._reference import reconstruct_brdf as reconstruct_brdf
 from ._reference import sample_bilinear as sample_bilinear
@@ -12,9 +17,14 @@ from ._reference import sample_bilinear as sample_bilinear
 __all__ = [
     "Reconstruction",
     "reconstruct_capture",
+    "BandSetup",
+    "prepare_bands",
+    "reconstruct_bands",
     "MIN_SCANLINE_SAMPLES",
     "ScanlineBins",
     "bin_scanlines",
+    "ScanlineBinner",
+    "bin_layout",
     "MaskReason",
     "reconstruct_brdf",
     "sample_bilinear",

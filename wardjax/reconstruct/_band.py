@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import functools
 import math
+from collections.abc import Iterator
 from typing import NamedTuple
 
 import jax
@@ -22,7 +23,7 @@ from .. import _shapes
 from ..geometry import band_geometry_jnp, rig_constants
 from ._reference import MaskReason
 
-__all__ = ["Reconstruction", "reconstruct_capture"]
+__all__ = ["BandSetup", "Reconstruction", "prepare_bands", "reconstruct_bands", "reconstruct_capture"]
 
 
 def _smooth_on(image: np.ndarray, mask: np.ndarray, sigma: float) -> np.ndarray:
@@ -191,41 +192,41 @@ def _reconstruct_band(
     return f_r, flags, wi, wo, pts, f_clip  # which pixels see the probe: the first pass already has it
 
 
-def reconstruct_capture(
-    cap, *, band_rows: int = 512, dtype: DTypeLike = np.float32, clip_bounds: bool = False
-) -> Reconstruction:
-    """Reconstruct ``f_r`` for every probe pixel of a ``method = "scanline"`` capture.
+class BandSetup(NamedTuple):
+    """What the band pass of :func:`reconstruct_bands` needs, from the first pass over a capture.
 
-    Two passes over bands of ``band_rows`` rows, each one compiled program
-    (``jnp``, in ``dtype``). First, which pixels see the probe and the standard; the standard's image
-    is cropped there and smoothed (``fit.smooth_standard_px``); the standard
-    is uniform and Lambertian, so it varies only slowly with irradiance and
-    vignetting, and smoothing removes its noise and quantisation from every
-    reconstructed value. Then, per band of the probe's rows and columns only, the geometry of each pixel
-    (:func:`~wardjax.geometry.band_geometry_jnp`), its mirror point on the
-    standard sampled bilinearly, and eq. "f_r,measured" with its masks
-    (:func:`~wardjax.reconstruct_brdf`), fused. ``dtype`` sets the storage
-    and the precision (float32 keeps a 12 MP capture in memory and is ~10⁻⁴
-    px accurate in the mirror mapping; float64 for the effects workflow).
-    ``clip_bounds`` also keeps :attr:`Reconstruction.f_clip`, the lower
-    bound of every probe pixel clipped by the sensor (censored data for
-    :func:`wardjax.effects.discover`; one more image in memory).
+    Attributes
+    ----------
+    probe
+        ``(H, W)`` bool: the pixel sees the probe.
+    box
+        Row and column slices of the probe's bounding box, ``None`` if no pixel sees it.
+    kernel
+        The constant arguments of the band kernel (rig, cropped standard, …), in ``dtype``.
+    dtype
+        Storage and precision of the reconstruction.
+    """
+
+    probe: np.ndarray
+    box: tuple[slice, slice] | None
+    kernel: dict
+    dtype: np.dtype
+
+
+def prepare_bands(cap, *, band_rows: int = 512, dtype: DTypeLike = np.float32) -> BandSetup:
+    """The first pass of :func:`reconstruct_capture`: the probe, its box and the standard, cropped and smoothed.
+
+    Which pixels see the probe and the standard, band by band (one compiled
+    program); the standard's image is cropped there and smoothed
+    (``fit.smooth_standard_px``) for the mirror sampling of every band.
     """
     cfg, rig = cap.config, cap.rig
-    cam = rig.camera
-    h, w = cam.height, cam.width
+    h, w = rig.camera.height, rig.camera.width
     dtype = np.dtype(dtype)
     hb = max(1, min(band_rows, h))
-    f_r = np.full((h, w, 3), np.nan, dtype)
-    wi = np.zeros((h, w, 3), dtype)
-    wo = np.zeros((h, w, 3), dtype)
-    points = np.full((h, w, 3), np.nan, dtype)
-    flags = np.zeros((h, w), np.uint8)
     probe = np.zeros((h, w), bool)
-    f_clip = np.full((h, w, 3), np.nan, dtype) if clip_bounds else None
     on_std = np.empty((h, w), bool)
     dims = {"width": w, "height": h}
-
     with jax.enable_x64(dtype == np.float64):
         k = jnp.asarray(rig_constants(rig, cap.tangent), dtype)
         for r0 in range(0, h, hb):
@@ -234,7 +235,7 @@ def reconstruct_capture(
             probe[r0:r1], on_std[r0:r1] = np.asarray(pm)[: r1 - r0], np.asarray(sm)[: r1 - r0]
         pbox = _bbox(probe, 0)
         if pbox is None:
-            return Reconstruction(f_r, flags, wi, wo, points, probe, f_clip)
+            return BandSetup(probe, None, {}, dtype)
         sigma = cfg.fit.smooth_standard_px
         box = _bbox(on_std, int(math.ceil(4 * sigma)) + 2) or (slice(0, min(2, h)), slice(0, min(2, w)))
         lit_std, clip_std = cap.lit[box], cap.lit_clipped[box]
@@ -245,38 +246,99 @@ def reconstruct_capture(
             dark_std = dark_std if cap.dark is None else _smooth_on(dark_std, std_mask, sigma)
         std = np.concatenate([lit_std, dark_std, clip_std.astype(np.float32)], -1)
         del lit_std, dark_std, clip_std
-        std_size = jnp.asarray([std.shape[1], std.shape[0]], jnp.int32)
-        bucket, pad = _shapes.bucket, _shapes.pad_to_shape
-        std = jnp.asarray(pad(std, (bucket(std.shape[0]), bucket(std.shape[1]))), dtype)
-        offset = jnp.asarray([box[1].start, box[0].start], dtype)
-        rho = jnp.asarray(np.broadcast_to(cap.rho_standard, (3,)), dtype)
-        nf = jnp.asarray(cfg.fit.noise_floor, dtype)
-        sat = jnp.asarray(cap.saturation, dtype)
-        rows_p, cols = pbox
-        step = max(1, min(hb, rows_p.stop - rows_p.start))  # rows per band; the kernel sees them padded
-        band = (bucket(step), bucket(cols.stop - cols.start))
-        zeros = np.zeros(band + (3,), np.float32)
-        kw = {**dims, "ncols": band[1]}
-        for r0 in range(rows_p.start, rows_p.stop, step):
-            r1 = min(r0 + step, rows_p.stop)
-            n, m, sl = r1 - r0, cols.stop - cols.start, (slice(r0, r1), cols)
-            dark = zeros if cap.dark is None else pad(cap.dark[sl], band)
+        kernel = {
+            "k": k,
+            "std_size": jnp.asarray([std.shape[1], std.shape[0]], jnp.int32),
+            "std": jnp.asarray(
+                _shapes.pad_to_shape(std, (_shapes.bucket(std.shape[0]), _shapes.bucket(std.shape[1]))), dtype
+            ),
+            "offset": jnp.asarray([box[1].start, box[0].start], dtype),
+            "rho": jnp.asarray(np.broadcast_to(cap.rho_standard, (3,)), dtype),
+            "noise_floor": jnp.asarray(cfg.fit.noise_floor, dtype),
+            "saturation": jnp.asarray(cap.saturation, dtype),
+        }
+    return BandSetup(probe, pbox, kernel, dtype)
+
+
+def reconstruct_bands(cap, setup: BandSetup, step: int) -> Iterator[tuple[slice, tuple]]:
+    """The second pass of :func:`reconstruct_capture`, one band of ``step`` rows of the probe's box at a time.
+
+    Yields ``(rows, (f_r, flags, wi, wo, points, f_clip))``: the image rows
+    of the band and the band's values over the box's columns (see
+    :class:`Reconstruction`), so that a caller keeps only what it needs of
+    each band (:func:`wardjax.fit_capture` bins them for the fit and extracts
+    ρd from them; a whole image of each need not exist). The kernel sees every
+    band padded to one bucketed shape (one compiled program).
+    """
+    if setup.box is None:
+        return
+    dtype, kern = setup.dtype, setup.kernel
+    h, w = setup.probe.shape
+    rows_p, cols = setup.box
+    step = max(1, min(step, rows_p.stop - rows_p.start))
+    bucket, pad = _shapes.bucket, _shapes.pad_to_shape
+    band = (bucket(step), bucket(cols.stop - cols.start))
+    zeros = np.zeros(band + (3,), np.float32)
+    for r0 in range(rows_p.start, rows_p.stop, step):
+        r1 = min(r0 + step, rows_p.stop)
+        n, m, sl = r1 - r0, cols.stop - cols.start, (slice(r0, r1), cols)
+        dark = zeros if cap.dark is None else pad(cap.dark[sl], band)
+        with jax.enable_x64(dtype == np.float64):
             out = _reconstruct_band(
-                k,
+                kern["k"],
                 np.arange(r0, r0 + band[0], dtype=dtype),
                 jnp.asarray(cols.start, dtype),
                 pad(cap.lit[sl], band),
                 dark,
                 pad(cap.lit_clipped[sl], band),
-                std,
-                std_size,
-                offset,
-                rho,
-                nf,
-                sat,
-                **kw,
+                kern["std"],
+                kern["std_size"],
+                kern["offset"],
+                kern["rho"],
+                kern["noise_floor"],
+                kern["saturation"],
+                width=w,
+                height=h,
+                ncols=band[1],
             )
+            values = tuple(np.asarray(o)[:n, :m] for o in out)
+        yield slice(r0, r1), values  # outside the x64 scope: the caller's code runs between bands
+
+
+def reconstruct_capture(
+    cap, *, band_rows: int = 512, dtype: DTypeLike = np.float32, clip_bounds: bool = False
+) -> Reconstruction:
+    """Reconstruct ``f_r`` for every probe pixel of a ``method = "scanline"`` capture.
+
+    Two passes over bands of ``band_rows`` rows, each one compiled program
+    (``jnp``, in ``dtype``). First, which pixels see the probe and the standard; the standard's image
+    is cropped there and smoothed (``fit.smooth_standard_px``); the standard
+    is uniform and Lambertian, so it varies only slowly with irradiance and
+    vignetting, and smoothing removes its noise and quantisation from every
+    reconstructed value (:func:`prepare_bands`). Then, per band of the
+    probe's rows and columns only, the geometry of each pixel
+    (:func:`~wardjax.geometry.band_geometry_jnp`), its mirror point on the
+    standard sampled bilinearly, and eq. "f_r,measured" with its masks
+    (:func:`~wardjax.reconstruct_brdf`), fused (:func:`reconstruct_bands`). ``dtype`` sets the storage
+    and the precision (float32 keeps a 12 MP capture in memory and is ~10⁻⁴
+    px accurate in the mirror mapping; float64 for the effects workflow).
+    ``clip_bounds`` also keeps :attr:`Reconstruction.f_clip`, the lower
+    bound of every probe pixel clipped by the sensor (censored data for
+    :func:`wardjax.effects.discover`; one more image in memory).
+    """
+    h, w = cap.rig.camera.height, cap.rig.camera.width
+    dtype = np.dtype(dtype)
+    setup = prepare_bands(cap, band_rows=band_rows, dtype=dtype)
+    f_r = np.full((h, w, 3), np.nan, dtype)
+    wi = np.zeros((h, w, 3), dtype)
+    wo = np.zeros((h, w, 3), dtype)
+    points = np.full((h, w, 3), np.nan, dtype)
+    flags = np.zeros((h, w), np.uint8)
+    f_clip = np.full((h, w, 3), np.nan, dtype) if clip_bounds else None
+    if setup.box is not None:
+        cols = setup.box[1]
+        for rows, out in reconstruct_bands(cap, setup, max(1, min(band_rows, h))):
             for dst, src in zip((f_r, flags, wi, wo, points, f_clip), out):
                 if dst is not None:
-                    dst[sl] = np.asarray(src)[:n, :m]
-    return Reconstruction(f_r, flags, wi, wo, points, probe, f_clip)
+                    dst[rows, cols] = src
+    return Reconstruction(f_r, flags, wi, wo, points, setup.probe, f_clip)

@@ -9,7 +9,7 @@ import numpy as np
 
 from ._band import Reconstruction
 
-__all__ = ["MIN_SCANLINE_SAMPLES", "ScanlineBins", "bin_scanlines"]
+__all__ = ["MIN_SCANLINE_SAMPLES", "ScanlineBinner", "ScanlineBins", "bin_layout", "bin_scanlines"]
 
 # A scanline (image column) with fewer usable bins than this is not fitted.
 MIN_SCANLINE_SAMPLES = 8
@@ -59,6 +59,69 @@ class ScanlineBins(NamedTuple):
     box: tuple[slice, slice]
 
 
+def bin_layout(probe: np.ndarray, max_samples: int) -> tuple[tuple[slice, slice], int]:
+    """The probe's bounding box and the bin size ``b = ⌈√(n_probe / max_samples)⌉`` of :func:`bin_scanlines`."""
+    n_probe = int(probe.sum())
+    rows = np.flatnonzero(probe.any(axis=1))
+    colz = np.flatnonzero(probe.any(axis=0))
+    box = (slice(rows[0], rows[-1] + 1), slice(colz[0], colz[-1] + 1))
+    return box, max(1, math.ceil(math.sqrt(n_probe / max_samples)))
+
+
+class ScanlineBinner:
+    """:func:`bin_scanlines` fed band by band: the block sums of each band kept, its pixels not.
+
+    Bands (see :func:`~wardjax.reconstruct.reconstruct_bands`) are given in
+    order, each over the box's columns, starting at the box's first row plus a
+    multiple of ``b`` and holding a multiple of ``b`` rows (the last one any);
+    the result is that of :func:`bin_scanlines` on the whole reconstruction.
+    """
+
+    def __init__(self, probe: np.ndarray, box: tuple[slice, slice], b: int) -> None:
+        self.probe, self.box, self.b = probe, box, b
+        self.sums: dict[str, list[np.ndarray]] = {}
+
+    def _total(self, a: np.ndarray, fill) -> np.ndarray:  # block sums over the b × b bins, float64
+        return _block_sum(_pad_to(a, self.b, fill).astype(np.float64), self.b)
+
+    def add(self, rows: slice, f_r, wi, wo, points, f_clip=None) -> None:
+        """Add the band of image ``rows`` (values over the box's columns)."""
+        total, keep = self._total, self.sums.setdefault
+        fin = np.isfinite(f_r)
+        keep("n_f", []).append(total(fin, False))
+        keep("s_f", []).append(total(np.where(fin, f_r, 0.0), 0.0))
+        if f_clip is not None:
+            cin = np.isfinite(f_clip)
+            keep("n_c", []).append(total(cin, False))
+            keep("s_c", []).append(total(np.where(cin, f_clip, 0.0), 0.0))
+        keep("n_p", []).append(total(self.probe[rows, self.box[1]], False))
+        keep("wi", []).append(total(wi, 0.0))
+        keep("wo", []).append(total(wo, 0.0))
+        keep("p", []).append(total(np.nan_to_num(points), 0.0))
+
+    def result(self) -> ScanlineBins:
+        """The bins of every band added (see :func:`bin_scanlines`)."""
+        t = {k: np.concatenate(v, axis=0) for k, v in self.sums.items()}
+        b = self.b
+        half = max(1.0, b * b / 2)
+        n_f, s_f = t["n_f"], t["s_f"]
+        f_bin = np.where(n_f >= half, s_f / np.maximum(n_f, 1), np.nan)
+        cens = np.zeros(f_bin.shape, bool)
+        if "n_c" in t:
+            n_c = t["n_c"]
+            cens = (n_c > 0) & (n_f + n_c >= half)
+            f_bin = np.where(cens, (s_f + t["s_c"]) / np.maximum(n_f + n_c, 1), f_bin)
+        n_p = np.maximum(t["n_p"], 1)[..., None]
+        wi_bin, wo_bin = t["wi"] / n_p, t["wo"] / n_p
+        for d in (wi_bin, wo_bin):
+            nrm = np.linalg.norm(d, axis=-1, keepdims=True)
+            d /= np.where(nrm > 0, nrm, 1.0)
+            d[nrm[..., 0] == 0] = (0.0, 0.0, 1.0)
+        p_bin = t["p"] / n_p
+        scan = lambda a: np.ascontiguousarray(a.transpose(1, 0, 2))
+        return ScanlineBins(scan(f_bin), scan(cens), scan(wi_bin), scan(wo_bin), scan(p_bin), b, self.box)
+
+
 def bin_scanlines(rec: Reconstruction, max_samples: int) -> ScanlineBins:
     r"""Bin a reconstruction's probe ``b × b`` (at most ``max_samples`` bins), image columns as scanlines.
 
@@ -75,37 +138,10 @@ def bin_scanlines(rec: Reconstruction, max_samples: int) -> ScanlineBins:
       the mean of its unclipped pixels alone (that would drop the brightest).
 
     Directions and positions are the means over the bin's probe pixels, the
-    directions renormalised.
+    directions renormalised. :class:`ScanlineBinner` does the same band by band.
     """
-    probe = rec.probe
-    n_probe = int(probe.sum())
-    rows = np.flatnonzero(probe.any(axis=1))
-    colz = np.flatnonzero(probe.any(axis=0))
-    box = (slice(rows[0], rows[-1] + 1), slice(colz[0], colz[-1] + 1))
-    b = max(1, math.ceil(math.sqrt(n_probe / max_samples)))
-    half = max(1.0, b * b / 2)
-
-    def total(a, fill):  # block sums over the b × b bins of the (cropped) bounding box, float64
-        return _block_sum(_pad_to(a, b, fill).astype(np.float64), b)
-
-    fc = rec.f_r[box]
-    fin = np.isfinite(fc)
-    n_f = total(fin, False)
-    s_f = total(np.where(fin, fc, 0.0), 0.0)
-    f_bin = np.where(n_f >= half, s_f / np.maximum(n_f, 1), np.nan)
-    cens = np.zeros(f_bin.shape, bool)
-    if rec.f_clip is not None:
-        cc = rec.f_clip[box]
-        cin = np.isfinite(cc)
-        n_c = total(cin, False)
-        cens = (n_c > 0) & (n_f + n_c >= half)
-        f_bin = np.where(cens, (s_f + total(np.where(cin, cc, 0.0), 0.0)) / np.maximum(n_f + n_c, 1), f_bin)
-    n_p = np.maximum(total(probe[box], False), 1)[..., None]
-    wi_bin, wo_bin = total(rec.wi[box], 0.0) / n_p, total(rec.wo[box], 0.0) / n_p
-    for d in (wi_bin, wo_bin):
-        nrm = np.linalg.norm(d, axis=-1, keepdims=True)
-        d /= np.where(nrm > 0, nrm, 1.0)
-        d[nrm[..., 0] == 0] = (0.0, 0.0, 1.0)
-    p_bin = total(np.nan_to_num(rec.points[box]), 0.0) / n_p
-    scan = lambda a: np.ascontiguousarray(a.transpose(1, 0, 2))
-    return ScanlineBins(scan(f_bin), scan(cens), scan(wi_bin), scan(wo_bin), scan(p_bin), b, box)
+    box, b = bin_layout(rec.probe, max_samples)
+    binner = ScanlineBinner(rec.probe, box, b)
+    clip = None if rec.f_clip is None else rec.f_clip[box]
+    binner.add(box[0], rec.f_r[box], rec.wi[box], rec.wo[box], rec.points[box], clip)
+    return binner.result()

@@ -1,4 +1,5 @@
-"""Renders of the capture rig: Radiance (through pyradiance) and a small differentiable JAX renderer."""
+"""Renders: the capture rig, a sphere under an environment and a phone screen reflected in a sample, each by
+Radiance (through pyradiance) and by a small differentiable JAX renderer; slanted-edge MTFs and grating spectra."""
 
 from ._radiance import RTRACE_SETTINGS as RTRACE_SETTINGS
 from ._radiance import from_radiance_rgb as from_radiance_rgb
@@ -9,6 +10,24 @@ from ._radiance import texture_grid as texture_grid
 from ._jax import render_rig as render_rig
 from ._mtf import EdgeMTF as EdgeMTF
 from ._mtf import slanted_edge_mtf as slanted_edge_mtf
+from ._scenes import LUMINOUS_EFFICACY as LUMINOUS_EFFICACY
+from ._scenes import DistantSources as DistantSources
+from ._scenes import PhoneScene as PhoneScene
+from ._scenes import ScreenSources as ScreenSources
+from ._scenes import camera_rays as camera_rays
+from ._scenes import environment_sources as environment_sources
+from ._scenes import phone_scene as phone_scene
+from ._scenes import sky_environment as sky_environment
+from ._scenes import square_wave as square_wave
+from ._jax_scenes import render_phone as render_phone
+from ._jax_scenes import render_sphere as render_sphere
+from ._radiance_scenes import SCENE_SETTINGS as SCENE_SETTINGS
+from ._radiance_scenes import phone_radiance_scene as phone_radiance_scene
+from ._radiance_scenes import radiance_render_phone as radiance_render_phone
+from ._radiance_scenes import radiance_render_sphere as radiance_render_sphere
+from ._radiance_scenes import sphere_radiance_scene as sphere_radiance_scene
+from ._spectra import GratingSpectrum as GratingSpectrum
+from ._spectra import grating_spectrum as grating_spectrum
 
 __all__ = [
     "RTRACE_SETTINGS",
@@ -20,4 +39,22 @@ __all__ = [
     "render_rig",
     "EdgeMTF",
     "slanted_edge_mtf",
+    "LUMINOUS_EFFICACY",
+    "DistantSources",
+    "PhoneScene",
+    "ScreenSources",
+    "camera_rays",
+    "environment_sources",
+    "phone_scene",
+    "sky_environment",
+    "square_wave",
+    "render_phone",
+    "render_sphere",
+    "SCENE_SETTINGS",
+    "phone_radiance_scene",
+    "radiance_render_phone",
+    "radiance_render_sphere",
+    "sphere_radiance_scene",
+    "GratingSpectrum",
+    "grating_spectrum",
 ]

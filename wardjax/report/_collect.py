@@ -8,7 +8,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-__all__ = ["PARAMETERS", "CaptureResult", "flag_outliers", "load_fits"]
+__all__ = ["PARAMETERS", "CaptureResult", "flag_outliers", "load_chains", "load_fits", "split_rhat"]
 
 # The parameters compared across captures (ρd as its mean over RGB).
 PARAMETERS = ("rho_d", "rho_s", "alpha_x", "alpha_y")
@@ -87,3 +87,37 @@ def flag_outliers(results: list[CaptureResult]) -> dict[str, set[str]]:
             if z > OUTLIER_Z:
                 flags[r.name].add(key)
     return flags
+
+
+def load_chains(result: CaptureResult) -> dict[str, np.ndarray] | None:
+    """The α posterior's stored chains (``posterior.npz``: ``(steps, walkers)`` per parameter), if any."""
+    path = result.folder / "posterior.npz" if result.folder is not None else None
+    if path is None or not path.is_file():
+        return None
+    with np.load(path) as z:
+        return {k: z[k] for k in z.files}
+
+
+def split_rhat(chains) -> float:
+    r"""Split-:math:`\hat R` of one parameter's chains ``(steps, walkers)`` (Gelman et al., BDA3, §11.4).
+
+    Each walker's chain is cut in halves, giving ``m = 2W`` chains of length
+    ``n``; with ``B`` ``n`` times the variance of their means and ``W̄`` the mean
+    of their variances,
+
+    .. math:: \hat R = \sqrt{\frac{(n-1)/n\,\bar W + B/n}{\bar W}}.
+
+    It tends to 1 as the chains lengthen: about ``√(1 + τ/n)`` for mixed
+    half-chains of ``n`` steps and integrated autocorrelation time ``τ`` (the
+    variance of a chain's mean is ``τ/n`` of the parameter's), so an ensemble
+    whose walkers are each 50 τ long reads about 1.02. Well above that
+    (> 1.1), some walkers have not reached the posterior or still drift.
+    """
+    x = np.asarray(chains, np.float64)
+    n = x.shape[0] // 2
+    if n < 2:
+        return float("nan")
+    halves = np.concatenate([x[:n], x[n : 2 * n]], axis=1)  # (n, 2W)
+    w = np.mean(np.var(halves, axis=0, ddof=1))
+    b = n * np.var(np.mean(halves, axis=0), ddof=1)
+    return float(np.sqrt(((n - 1) / n * w + b / n) / w)) if w > 0 else float("nan")

@@ -8,9 +8,17 @@ import numpy as np
 from matplotlib.figure import Figure
 
 from ..texture import TextureModel, read_rho_d, synthesize_texture
-from ._collect import PARAMETERS, CaptureResult
+from ._collect import PARAMETERS, CaptureResult, load_chains
 
-__all__ = ["batch_figure", "errors_figure", "gap_figure", "texture_figure"]
+__all__ = [
+    "batch_figure",
+    "corner_figure",
+    "errors_figure",
+    "gap_figure",
+    "residual_figure",
+    "texture_figure",
+    "trace_figure",
+]
 
 _LABELS = {"rho_d": r"$\rho_d$ (mean RGB)", "rho_s": r"$\rho_s$", "alpha_x": r"$\alpha_x$", "alpha_y": r"$\alpha_y$"}
 _MODELS = (
@@ -23,7 +31,7 @@ _MODELS = (
 def errors_figure(result: CaptureResult) -> Figure | None:
     """1-σ of the shared parameters by each error model (scanline captures); the α posterior (smartphone)."""
     fit = result.doc["fit"]
-    fig = Figure(figsize=(6.4, 3.0), dpi=100)
+    fig = Figure(figsize=(6.4, 2.0 if "posterior" in fit else 3.0), dpi=100)
     ax = fig.add_subplot(1, 1, 1)
     if "posterior" in fit:
         post = fit["posterior"]
@@ -105,6 +113,98 @@ def gap_figure(result: CaptureResult) -> Figure | None:
     ax.set_ylabel("gap (reduced χ²)")
     ax.set_title(f"{result.name}: missing-effect discovery", fontsize=9)
     ax.legend(fontsize=8, frameon=False)
+    fig.tight_layout()
+    return fig
+
+
+def residual_figure(result: CaptureResult) -> Figure | None:
+    """Measured ``f_r`` and the residual (measured − joint fit) over the image, from ``residuals.npz``.
+
+    Both at the fit's binning, placed at their image pixels; the residual's
+    colour scale is symmetric about 0 (red: the model is too low).
+    """
+    path = result.folder / "residuals.npz"
+    if not path.is_file():
+        return None
+    with np.load(path) as z:
+        f_r, model, b, (r0, c0) = z["f_r"], z["model"], int(z["binning"]), z["origin"]
+    meas = np.mean(f_r, axis=-1)  # NaN where a bin was not fitted
+    res = np.mean(f_r - model, axis=-1)  # NaN where any channel was not fitted
+    rows, cols = meas.shape
+    extent = (c0 - 0.5, c0 + b * cols - 0.5, r0 + b * rows - 0.5, r0 - 0.5)  # image pixels
+    fig = Figure(figsize=(8.6, 3.4), dpi=100)
+    ax = fig.add_subplot(1, 2, 1)
+    finite = meas[np.isfinite(meas)]
+    hi = float(np.percentile(finite, 99.5)) if finite.size else 1.0
+    im = ax.imshow(np.ma.masked_invalid(meas), cmap="magma", vmin=0, vmax=hi, extent=extent, aspect="equal")
+    fig.colorbar(im, ax=ax, label=r"measured $f_r$ (sr$^{-1}$, mean RGB)", fraction=0.046)
+    ax.set_title("measured BRDF over the probe", fontsize=8.5)
+    ax.set_xlabel("image column (px)")
+    ax.set_ylabel("image row (px)")
+    ax2 = fig.add_subplot(1, 2, 2)
+    ok = np.isfinite(res)
+    lim = float(np.percentile(np.abs(res[ok]), 99)) if ok.any() else 1.0
+    lim = lim if lim > 0 else 1.0
+    im2 = ax2.imshow(np.ma.masked_invalid(res), cmap="RdBu_r", vmin=-lim, vmax=lim, extent=extent, aspect="equal")
+    fig.colorbar(im2, ax=ax2, label=r"measured − fit (sr$^{-1}$)", fraction=0.046)
+    rms = float(np.sqrt(np.mean(res[ok] ** 2))) if ok.any() else float("nan")
+    mean_f = float(np.mean(meas[ok])) if ok.any() else float("nan")
+    ax2.set_title(f"residual of the joint fit (RMS {rms / mean_f:.1%} of the mean $f_r$)", fontsize=8.5)
+    ax2.set_xlabel("image column (px)")
+    ax2.set_yticks([])
+    fig.suptitle(f"{result.name}: fit over the image ({b}×{b} px bins; white: not fitted)", fontsize=9)
+    fig.tight_layout()
+    return fig
+
+
+_CORNER = (("alpha", r"$\alpha$"), ("sigma_obs", r"$\sigma_\mathrm{obs}$"), ("ppb_median", "median PPB"))
+
+
+def corner_figure(result: CaptureResult) -> Figure | None:
+    """The α posterior's corner plot (α, observer noise, median threshold), from ``posterior.npz``.
+
+    Drawn by the ``corner`` package over the central 99.5 % of each parameter;
+    the dashed lines are the 16/50/84 % quantiles, quoted above each column.
+    """
+    chains = load_chains(result)
+    if chains is None:
+        return None
+    import corner
+
+    keys = [k for k, _ in _CORNER if k in chains]
+    draws = np.column_stack([chains[k].ravel() for k in keys]).astype(np.float64)
+    fig = Figure(figsize=(6.0, 6.0), dpi=100)
+    corner.corner(
+        draws,
+        fig=fig,
+        labels=[dict(_CORNER)[k] for k in keys],
+        range=[0.995] * len(keys),  # the central 99.5 % of each parameter: the long tails would squash the rest
+        quantiles=[0.16, 0.5, 0.84],
+        show_titles=True,
+        title_fmt=".3f",
+        title_kwargs={"fontsize": 9},
+        label_kwargs={"fontsize": 10},
+        bins=30,
+        smooth=1.0,
+    )
+    return fig
+
+
+def trace_figure(result: CaptureResult, walkers: int = 8) -> Figure | None:
+    """α along the chain for a few walkers: a chain diagnostic (mixing, no drift)."""
+    chains = load_chains(result)
+    if chains is None:
+        return None
+    a = chains["alpha"]
+    thin = int(chains.get("thin", 1))
+    fig = Figure(figsize=(6.4, 2.4), dpi=100)
+    ax = fig.add_subplot(1, 1, 1)
+    steps = np.arange(a.shape[0]) * thin
+    for w in range(min(walkers, a.shape[1])):
+        ax.plot(steps, a[:, w], lw=0.6, alpha=0.8)
+    ax.set_xlabel("step (after burn-in)")
+    ax.set_ylabel(r"$\alpha$")
+    ax.set_title(f"{result.name}: α chains of {min(walkers, a.shape[1])} of {a.shape[1]} walkers", fontsize=9)
     fig.tight_layout()
     return fig
 

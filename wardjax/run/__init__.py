@@ -10,10 +10,15 @@ from typing import TYPE_CHECKING
 if TYPE_CHECKING:  # the API as the type checker and the reader see it
     from ._batch import BatchItem as BatchItem
     from ._batch import find_captures as find_captures
+    from ._batch import fit_one as fit_one
     from ._batch import run_batch as run_batch
     from ._batch import scanline_note as scanline_note
     from ._cli import main as main
     from ._demo import run_capture_demo as run_capture_demo
+    from ._distributed import CompileCounter as CompileCounter
+    from ._distributed import JaxWorker as JaxWorker
+    from ._distributed import cluster_compiles as cluster_compiles
+    from ._distributed import open_scheduler as open_scheduler
     from ._fit_capture import CaptureFit as CaptureFit
     from ._fit_capture import fit_capture as fit_capture
     from ._smartphone import fit_smartphone_capture as fit_smartphone_capture
@@ -22,10 +27,15 @@ if TYPE_CHECKING:  # the API as the type checker and the reader see it
 _API = {
     "BatchItem": "._batch",
     "find_captures": "._batch",
+    "fit_one": "._batch",
     "run_batch": "._batch",
     "scanline_note": "._batch",
     "main": "._cli",
     "run_capture_demo": "._demo",
+    "CompileCounter": "._distributed",
+    "JaxWorker": "._distributed",
+    "cluster_compiles": "._distributed",
+    "open_scheduler": "._distributed",
     "CaptureFit": "._fit_capture",
     "fit_capture": "._fit_capture",
     "fit_smartphone_capture": "._smartphone",
@@ -33,10 +43,15 @@ _API = {
 __all__ = [
     "BatchItem",
     "find_captures",
+    "fit_one",
     "run_batch",
     "scanline_note",
     "main",
     "run_capture_demo",
+    "CompileCounter",
+    "JaxWorker",
+    "cluster_compiles",
+    "open_scheduler",
     "CaptureFit",
     "fit_capture",
     "fit_smartphone_capture",

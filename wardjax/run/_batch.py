@@ -23,8 +23,11 @@ from __future__ import annotations
 import csv
 import dataclasses
 import datetime
+import glob
 import io
 import json
+import re
+import secrets
 import shutil
 import traceback
 from collections.abc import Callable
@@ -36,7 +39,7 @@ from ..export import write_capture_outputs
 from ._fit_capture import fit_capture
 from ._smartphone import fit_smartphone_capture
 
-__all__ = ["BatchItem", "find_captures", "run_batch", "SUMMARY_COLUMNS"]
+__all__ = ["BatchItem", "find_captures", "fit_one", "run_batch", "SUMMARY_COLUMNS"]
 
 SUMMARY_COLUMNS = (
     "capture",
@@ -203,6 +206,52 @@ def _one_line(e: BaseException, log: Path | None = None) -> str:
     return f"unexpected failure ({type(e).__name__}{': ' + first if first else ''}){where}"
 
 
+# The tail of a staging folder's name after ``.<name>``: this attempt's token (or none, from older runs).
+_STAGING = re.compile(r"(\.[0-9a-f]{8})?\.partial")
+
+
+def fit_one(source: Path, name: str, out: Path, created: str, force: bool = False) -> tuple[BatchItem, str | None]:
+    """Fit one capture of a batch into ``out/<name>/``: the unit of work, locally or as a cluster task.
+
+    Skips a capture already finished with the current inputs (unless
+    ``force``). The outputs are written into a staging folder of this attempt
+    (``out/.<name>.<token>.partial``) and committed with ``params.json`` last,
+    so a killed attempt leaves no file in ``out/<name>/`` and its rerun (a
+    retried task) starts afresh from what it left; a capture an earlier
+    attempt of *this* batch (same ``created``) already committed is not
+    written again.
+
+    Returns
+    -------
+    BatchItem, str or None
+        The outcome, and the traceback of a failure the code did not foresee
+        (for ``errors.log``), else ``None``.
+    """
+    out_dir = out / name
+    remove_temporaries(out_dir)
+    for stale in out.glob(f".{glob.escape(name)}.*partial"):  # what a killed attempt left behind
+        if _STAGING.fullmatch(stale.name[len(name) + 1 :]):
+            shutil.rmtree(stale, ignore_errors=True)
+    doc = _finished(source, out_dir)
+    if doc is not None and (not force or doc.get("created") == created):
+        return BatchItem(source, name, "ok", skipped=doc.get("created") != created, params=doc), None
+    staging = out / f".{name}.{secrets.token_hex(4)}.partial"
+    try:
+        cap = load_capture(source)
+        fitter = FITTERS.get(cap.method)
+        if fitter is None:
+            raise CaptureError(CAPTURE_FILE, "method", f"no fitter for method {cap.method!r}")
+        doc = fitter(cap, staging, created=created)
+        commit_folder(staging, out_dir, last="params.json")
+        return BatchItem(source, name, "ok", params=doc), None
+    except Exception as e:  # a bad capture must not sink the batch, nor leave half its outputs
+        shutil.rmtree(staging, ignore_errors=True)
+        tb = None
+        if _one_line(e).startswith("unexpected failure"):
+            tb = f"{name} ({source}):\n{''.join(traceback.format_exception(e))}"
+        return BatchItem(source, name, "error", error=_one_line(e, out / ERROR_LOG)), tb
+
+
 def run_batch(
     paths,
     out,
@@ -210,6 +259,7 @@ def run_batch(
     force: bool = False,
     progress: Callable[[int, int, BatchItem], None] | None = None,
     on_start: Callable[[int, int, str], None] | None = None,
+    scheduler=None,
 ) -> list[BatchItem]:
     """Fit every capture under ``paths`` into ``out``; write ``out/summary.csv``.
 
@@ -223,7 +273,15 @@ def run_batch(
         Refit captures that are already finished.
     progress, on_start
         Callbacks ``(index, total, item)`` after and ``(index, total, name)``
-        before each capture (the CLI draws its progress bar with them).
+        before each capture (the CLI draws its progress bar with them). On a
+        cluster ``progress`` is called as captures finish, ``index`` counting
+        them, and ``on_start`` once, before the first, with the cluster's name.
+    scheduler
+        ``None``: fit here, one capture after another. Otherwise a
+        ``dask.distributed`` cluster fits one capture per task: a
+        ``distributed.Client``, a scheduler address (``"tcp://host:8786"``) or
+        ``"local[:N]"`` (a ``LocalCluster`` of ``N`` worker processes); see
+        :func:`wardjax.run.open_scheduler`. The outputs are the same files.
 
     Returns
     -------
@@ -235,36 +293,31 @@ def run_batch(
     captures = find_captures(paths)
     names = _names(captures)
     created = datetime.datetime.now(datetime.UTC).replace(microsecond=0).isoformat().replace("+00:00", "Z")
-    items: list[BatchItem] = []
+    jobs = [(src, name, out, created, force) for src, name in zip(captures, names)]
+    done: dict[int, BatchItem] = {}
     log: list[str] = []
-    for i, (src, name) in enumerate(zip(captures, names)):
-        if on_start:
-            on_start(i, len(captures), name)
-        out_dir = out / name
-        staging = out / f".{name}.partial"  # a capture's outputs, committed once all are written
-        remove_temporaries(out_dir)
-        shutil.rmtree(staging, ignore_errors=True)  # what a killed run left behind
-        doc = None if force else _finished(src, out_dir)
-        if doc is not None:
-            item = BatchItem(src, name, "ok", skipped=True, params=doc)
-        else:
-            try:
-                cap = load_capture(src)
-                fitter = FITTERS.get(cap.method)
-                if fitter is None:
-                    raise CaptureError(CAPTURE_FILE, "method", f"no fitter for method {cap.method!r}")
-                doc = fitter(cap, staging, created=created)
-                commit_folder(staging, out_dir, last="params.json")
-                item = BatchItem(src, name, "ok", params=doc)
-            except Exception as e:  # a bad capture must not sink the batch, nor leave half its outputs
-                shutil.rmtree(staging, ignore_errors=True)
-                if _one_line(e).startswith("unexpected failure"):
-                    log.append(f"{name} ({src}):\n{''.join(traceback.format_exception(e))}")
-                    write_bytes_atomic(out / ERROR_LOG, "\n".join(log).encode())
-                item = BatchItem(src, name, "error", error=_one_line(e, out / ERROR_LOG))
-        items.append(item)
-        write_summary(out / "summary.csv", items)
+
+    def record(i: int, item: BatchItem, tb: str | None) -> None:
+        done[i] = item
+        if tb is not None:
+            log.append(tb)
+            write_bytes_atomic(out / ERROR_LOG, "\n".join(log).encode())
+        write_summary(out / "summary.csv", [done[k] for k in sorted(done)])
         if progress:
-            progress(i, len(captures), item)
+            progress(len(done) - 1 if scheduler is not None else i, len(jobs), item)
+
+    if scheduler is None:
+        for i, job in enumerate(jobs):
+            if on_start:
+                on_start(i, len(jobs), job[1])
+            record(i, *fit_one(*job))
+    else:
+        from ._distributed import map_on_cluster
+
+        def fail(i: int, why: str) -> None:
+            record(i, BatchItem(jobs[i][0], jobs[i][1], "error", error=why), None)
+
+        map_on_cluster(fit_one, jobs, scheduler, record, fail, on_start=on_start)
+    items = [done[i] for i in range(len(jobs))]
     write_summary(out / "summary.csv", items)
     return items

@@ -100,36 +100,14 @@ def _fail_unexpected(exc: BaseException) -> None:
     show_envvar=True,
     help="Compile afresh and keep nothing between runs.",
 )
-def main(cache_dir: Path | None, no_cache: bool) -> None:
+@click.pass_context
+def main(ctx: click.Context, cache_dir: Path | None, no_cache: bool) -> None:
     """Measure Ward BRDF parameters from photographs, with honest uncertainties."""
+    ctx.obj = {"cache_dir": None if no_cache else str(cache_dir or "")}  # for cluster workers: see fit --scheduler
     if not no_cache:
-        _enable_compile_cache(cache_dir)
+        from ._cache import enable_compile_cache
 
-
-def _enable_compile_cache(cache_dir: Path | None) -> None:
-    """Keep XLA's compiled programs on disk, so that a second run skips most compilation.
-
-    Compiling the kernels costs tens of seconds per process; JAX's persistent
-    cache makes that a one-time cost per machine and shape. Set here, in the
-    command (the process is ours), never on import of the library.
-    """
-    import os
-
-    import platformdirs
-
-    path = Path(cache_dir) if cache_dir else Path(platformdirs.user_cache_dir("wardjax")) / "xla"
-    try:
-        path.mkdir(parents=True, exist_ok=True)
-    except OSError:
-        return  # a read-only home: run without the cache rather than fail
-    if "jax" not in sys.modules:  # JAX reads these when it is imported: a command that never needs it never pays for it
-        os.environ["JAX_COMPILATION_CACHE_DIR"] = str(path)
-        os.environ["JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS"] = "0"
-        return
-    import jax
-
-    jax.config.update("jax_compilation_cache_dir", str(path))
-    jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
+        enable_compile_cache(cache_dir)
 
 
 def _fail(message: str, code: int = 2) -> None:
@@ -250,33 +228,12 @@ def gratings(display_name: str, viewing_name: str, out_dir: Path, orientation: s
 # --------------------------------------------------------------------------- fitting and simulating captures
 
 
-@main.command("fit")
-@click.argument("paths", nargs=-1, required=True, type=click.Path(path_type=Path))
-@click.option(
-    "--out",
-    "out_dir",
-    type=click.Path(file_okay=False, path_type=Path),
-    required=True,
-    help="Folder for the results: one subfolder per capture and summary.csv.",
-)
-@click.option("--force", is_flag=True, help="Refit captures whose results are already complete.")
-@click.option("--quiet", is_flag=True, help="No progress bar or table.")
-def fit_cmd(paths: tuple[Path, ...], out_dir: Path, force: bool, quiet: bool) -> None:
-    """Fit capture folders (or folders of them): params.json, ρd texture, scanline plot, material.rad.
-
-    A capture that cannot be used is reported with one line and the batch goes
-    on; the exit status is 2 if any capture failed. Rerunning skips finished
-    captures unless --force.
-    """
+def _fit_with_progress(paths, out_dir: Path, force: bool, quiet: bool, client, err: Console) -> list:
+    """:func:`~wardjax.run_batch` under a rich progress bar; each failed capture one line on ``err``."""
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
-    from ._batch import run_batch, scanline_note
+    from ._batch import run_batch
 
-    err = Console(stderr=True, emoji=False)
-    missing = [str(p) for p in paths if not p.exists()]
-    if missing:
-        _fail(f"{missing[0]}: no such capture folder")
-    _check_out_dir(out_dir)
     with Progress(
         TextColumn("{task.description}"),
         BarColumn(),
@@ -298,7 +255,58 @@ def fit_cmd(paths: tuple[Path, ...], out_dir: Path, force: bool, quiet: bool) ->
                 text = item.error if named else f"{item.name}: {item.error}"
                 err.print(f"[bold red]error:[/] {escape(text)}", highlight=False, soft_wrap=True)
 
-        items = run_batch(paths, out_dir, force=force, progress=progress, on_start=on_start)
+        return run_batch(paths, out_dir, force=force, progress=progress, on_start=on_start, scheduler=client)
+
+
+@main.command("fit")
+@click.argument("paths", nargs=-1, required=True, type=click.Path(path_type=Path))
+@click.option(
+    "--out",
+    "out_dir",
+    type=click.Path(file_okay=False, path_type=Path),
+    required=True,
+    help="Folder for the results: one subfolder per capture and summary.csv.",
+)
+@click.option("--force", is_flag=True, help="Refit captures whose results are already complete.")
+@click.option("--quiet", is_flag=True, help="No progress bar or table.")
+@click.option(
+    "--scheduler",
+    default=None,
+    metavar="ADDRESS|local[:N]",
+    help="Fit each capture as a task on a dask.distributed cluster: a scheduler's address, or local:N to start "
+    "N worker processes here [default: one capture after another in this process].",
+)
+@click.pass_context
+def fit_cmd(
+    ctx: click.Context, paths: tuple[Path, ...], out_dir: Path, force: bool, quiet: bool, scheduler: str | None
+) -> None:
+    """Fit capture folders (or folders of them): params.json, ρd texture, scanline plot, material.rad.
+
+    A capture that cannot be used is reported with one line and the batch goes
+    on; the exit status is 2 if any capture failed. Rerunning skips finished
+    captures unless --force.
+    """
+    import contextlib
+
+    from ._batch import scanline_note
+
+    err = Console(stderr=True, emoji=False)
+    missing = [str(p) for p in paths if not p.exists()]
+    if missing:
+        _fail(f"{missing[0]}: no such capture folder")
+    _check_out_dir(out_dir)
+    with contextlib.ExitStack() as stack:
+        client = None
+        if scheduler is not None:
+            from ._distributed import open_scheduler
+
+            try:
+                client = stack.enter_context(open_scheduler(scheduler, cache_dir=(ctx.obj or {}).get("cache_dir", "")))
+            except ValueError as exc:
+                return _fail(str(exc))
+            if not quiet:
+                err.print(f"dask dashboard: {client.dashboard_link}", highlight=False, soft_wrap=True)
+        items = _fit_with_progress(paths, out_dir, force, quiet, client, err)
     if not quiet:
         from rich.table import Table
 
@@ -513,6 +521,13 @@ def texture_analyze(
 @click.option("--seed", type=click.IntRange(min=0), default=0, show_default=True)
 @click.option("--iterations", type=click.IntRange(1, 100), default=5, show_default=True)
 @click.option(
+    "--match",
+    type=click.Choice(["binned", "exact"]),
+    default="binned",
+    show_default=True,
+    help="Histogram matching: Heeger & Bergen's binned CDFs and lookup (O(N)), or exact by sorting.",
+)
+@click.option(
     "-o",
     "--out",
     "out_path",
@@ -520,7 +535,7 @@ def texture_analyze(
     required=True,
     help=".tif: linear float ρd; .png: 8-bit sRGB view.",
 )
-def texture_synthesize(model_path: Path, size: str, seed: int, iterations: int, out_path: Path) -> None:
+def texture_synthesize(model_path: Path, size: str, seed: int, iterations: int, match: str, out_path: Path) -> None:
     """Synthesise a seamlessly tiling ρd texture of any size from a TEXTURE description."""
     from ..texture import TextureModel, synthesize_texture, write_texture_image
 
@@ -551,7 +566,12 @@ def texture_synthesize(model_path: Path, size: str, seed: int, iterations: int, 
         ) as bar:
             task = bar.add_task("", total=iterations)
             result = synthesize_texture(
-                model, shape, seed=seed, iterations=iterations, progress=lambda k, n: bar.update(task, completed=k)
+                model,
+                shape,
+                seed=seed,
+                iterations=iterations,
+                match=match,
+                progress=lambda k, n: bar.update(task, completed=k),
             )
         write_texture_image(out_path, result.image)
     except (ValueError, OSError) as e:  # the library speaks of shape=(height, width); the user typed --size WxH

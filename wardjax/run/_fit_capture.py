@@ -26,7 +26,15 @@ from ..capture import CAPTURE_FILE, MAX_CLIPPED_FRACTION, Capture, CaptureError
 from ..export import RADIANCE_NORMALIZATION
 from ..fit import CombinedFit, ScanlineFit, fit_scanlines, texture_field_covariance, with_texture_errors
 from ..fit._texture_field import lobe
-from ..reconstruct import MIN_SCANLINE_SAMPLES, MaskReason, bin_scanlines, reconstruct_capture
+from ..reconstruct import (
+    MIN_SCANLINE_SAMPLES,
+    BandSetup,
+    MaskReason,
+    ScanlineBinner,
+    bin_layout,
+    prepare_bands,
+    reconstruct_bands,
+)
 from ..texture import extract_rho_d
 from ..ward import Normalization, WardParams
 
@@ -68,6 +76,12 @@ class CaptureFit:
     profile
         The scanline plotted in ``scanline.png``: ``y`` (mm), measured ``f_r``,
         ``model`` and ``rho_d`` along it, and its ``x``.
+    fit_map
+        The fitted data over the image, at the fit's binning (written as
+        ``residuals.npz``): ``f_r`` and ``model`` ``(rows, cols, 3)`` (NaN
+        where a bin was not fitted), ``binning`` ``b`` and ``origin`` — the
+        image pixel ``(row, col)`` of the first bin's corner. Bin ``(i, j)``
+        covers image rows ``origin[0] + b·i …`` and columns ``origin[1] + b·j …``.
     tangent, checksums
         From the capture.
     """
@@ -87,6 +101,7 @@ class CaptureFit:
     probe: np.ndarray
     diagnostics: dict
     profile: dict
+    fit_map: dict
     tangent: tuple[float, float]
     checksums: dict
 
@@ -143,9 +158,10 @@ def fit_capture(cap: Capture, *, max_fit_samples: int = 50_000, band_rows: int =
     tangent = cap.tangent
     lit_name = cfg.images.lit
 
-    rec = reconstruct_capture(cap, band_rows=band_rows)
-    f_r, wi, wo, flags, probe = rec.f_r, rec.wi, rec.wo, rec.flags, rec.probe
-
+    # The reconstruction is streamed: band by band, binned for the fit (and its flags kept); the
+    # per-pixel values are made again, band by band, for the texture once the fit is known (_texture).
+    setup = prepare_bands(cap, band_rows=band_rows)
+    probe = setup.probe
     n_probe = int(probe.sum())
     if n_probe == 0:
         raise CaptureError(
@@ -158,21 +174,9 @@ def fit_capture(cap: Capture, *, max_fit_samples: int = 50_000, band_rows: int =
         raise CaptureError(
             lit_name, None, f"{sat:.0%} of the probe's pixels are saturated (at the largest code); reduce the exposure"
         )
-    n_valid = int((probe & np.all(np.isfinite(f_r), axis=-1)).sum())
-    counts = {name.lower(): int(np.sum(probe & ((flags & r) != 0))) for name, r in MaskReason.__members__.items()}
-    if n_valid == 0:
-        worst = max(counts, key=lambda reason: counts[reason])
-        why = {
-            "off_standard": "no probe pixel has its mirror point on the standard (check regions and the rig)",
-            "saturated": "every probe pixel or its mirror point is saturated; reduce the exposure",
-            "below_noise": f"the lamp signal (lit − dark) is below the noise floor ({cfg.fit.noise_floor}) "
-            "everywhere on the probe or the standard; check the exposure and the lamp",
-            "nonfinite": "the pixel values are not finite",
-        }[worst]
-        raise CaptureError(lit_name, None, f"no usable probe pixel: {why}")
+    bins, flags, n_valid, counts, step = _bin_bands(cap, setup, max_fit_samples, band_rows)
 
     # ---------------------------------------------------------------- fit data
-    bins = bin_scanlines(rec, max_fit_samples)
     b = bins.b
     F, WI, WO = bins.f_r, bins.wi, bins.wo  # (S, N, 3), scanlines = image columns
     X, Y = bins.points[..., 0], bins.points[..., 1]
@@ -206,9 +210,9 @@ def fit_capture(cap: Capture, *, max_fit_samples: int = 50_000, band_rows: int =
             rad, texture_field_covariance(F, WI, WO, cols_fit, rad.params, cfg.fit.model, RADIANCE_NORMALIZATION)
         )
 
-    rho_d = _texture(f_r, wi, wo, probe, comb.params, norm, bins.box, band_rows)
+    rho_d = _texture(cap, setup, step, comb.params, norm)
     model_f, spec = _model_values(comb, WI, WO, norm)
-    diagnostics = _diagnostics(rec, counts, rho_d, b, F, model_f, n_per, x_scan, res, comb, tex_err)
+    diagnostics = _diagnostics(probe, n_valid, counts, rho_d, b, F, model_f, n_per, x_scan, res, comb, tex_err)
     profile = _profile(F, Y, model_f, spec, n_per, x_scan)
     return CaptureFit(
         name=cap.name,
@@ -226,31 +230,62 @@ def fit_capture(cap: Capture, *, max_fit_samples: int = 50_000, band_rows: int =
         probe=probe,
         diagnostics=diagnostics,
         profile=profile,
+        fit_map=_fit_map(F, model_f, keep, bins),
         tangent=tangent,
         checksums=dict(cap.checksums),
     )
 
 
-def _texture(f_r, wi, wo, probe, params: WardParams, norm: Normalization, box, band_rows: int) -> np.ndarray:
+def _bin_bands(cap: Capture, setup: BandSetup, max_fit_samples: int, band_rows: int):
+    """The reconstruction's first pass: each band binned for the fit, its flags kept, its pixels dropped.
+
+    Returns the :class:`~wardjax.reconstruct.ScanlineBins`, the ``(H, W)``
+    flags, the count of usable probe pixels and of each mask reason, and the
+    rows per band (whole bins). Raises if no probe pixel is usable.
+    """
+    probe, cfg, lit_name = setup.probe, cap.config, cap.config.images.lit
+    box, b = bin_layout(probe, max_fit_samples)
+    step = max(b, band_rows // b * b)  # bands of whole bins
+    binner = ScanlineBinner(probe, box, b)
+    flags = np.zeros(probe.shape, np.uint8)
+    n_valid = 0
+    for rows, (f_b, flags_b, wi_b, wo_b, points_b, _) in reconstruct_bands(cap, setup, step):
+        flags[rows, box[1]] = flags_b
+        n_valid += int((probe[rows, box[1]] & np.all(np.isfinite(f_b), axis=-1)).sum())
+        binner.add(rows, f_b, wi_b, wo_b, points_b)
+    counts = {name.lower(): int(np.sum(probe & ((flags & r) != 0))) for name, r in MaskReason.__members__.items()}
+    if n_valid == 0:
+        worst = max(counts, key=lambda reason: counts[reason])
+        why = {
+            "off_standard": "no probe pixel has its mirror point on the standard (check regions and the rig)",
+            "saturated": "every probe pixel or its mirror point is saturated; reduce the exposure",
+            "below_noise": f"the lamp signal (lit − dark) is below the noise floor ({cfg.fit.noise_floor}) "
+            "everywhere on the probe or the standard; check the exposure and the lamp",
+            "nonfinite": "the pixel values are not finite",
+        }[worst]
+        raise CaptureError(lit_name, None, f"no usable probe pixel: {why}")
+    return binner.result(), flags, n_valid, counts, step
+
+
+def _texture(cap: Capture, setup: BandSetup, step: int, params: WardParams, norm: Normalization) -> np.ndarray:
     """The per-pixel ρd over the probe's bounding box, band by band (NaN off the probe).
 
+    The reconstruction's second pass (:func:`~wardjax.reconstruct.reconstruct_bands`):
+    each band's ``f_r`` and directions are made, turned into ρd and dropped.
     Bands are padded to one bucketed shape (NaN values, sliced off): one
     compilation for the whole image, shared by captures of one rig.
     """
-    h, w = probe.shape
-    (rows_p, cols_p) = box
-    r0, r1, c0, c1 = rows_p.start, rows_p.stop, cols_p.start, cols_p.stop
-    rho_d = np.full((h, w, 3), np.nan, np.float32)
-    hb = min(band_rows, r1 - r0)
-    band = (_shapes.bucket(hb), _shapes.bucket(c1 - c0))
-    for s0 in range(r0, r1, hb):
-        s1 = min(s0 + hb, r1)
-        sl = (slice(s0, s1), slice(c0, c1))
-        fb, wib, wob = (
-            _shapes.pad_to_shape(a, band, fill) for a, fill in ((f_r[sl], np.nan), (wi[sl], 0.0), (wo[sl], 0.0))
-        )
-        out = extract_rho_d(fb, wib, wob, params, normalization=norm)[: s1 - s0, : c1 - c0]
-        rho_d[sl] = np.where(probe[sl][..., None], out, np.nan)
+    probe = setup.probe
+    rho_d = np.full((*probe.shape, 3), np.nan, np.float32)
+    if setup.box is None:
+        return rho_d
+    rows_p, cols = setup.box
+    band = (_shapes.bucket(min(step, rows_p.stop - rows_p.start)), _shapes.bucket(cols.stop - cols.start))
+    for rows, (f_r, _, wi, wo, _, _) in reconstruct_bands(cap, setup, step):
+        n, m = f_r.shape[:2]
+        fb, wib, wob = (_shapes.pad_to_shape(a, band, fill) for a, fill in ((f_r, np.nan), (wi, 0.0), (wo, 0.0)))
+        out = extract_rho_d(fb, wib, wob, params, normalization=norm)[:n, :m]
+        rho_d[rows, cols] = np.where(probe[rows, cols][..., None], out, np.nan)
     return rho_d
 
 
@@ -262,20 +297,18 @@ def _model_values(comb: CombinedFit, WI, WO, norm: str) -> tuple[np.ndarray, np.
 
 
 def _diagnostics(
-    rec, counts, rho_d, b, F, model_f, n_per, x_scan, res: ScanlineFit, comb: CombinedFit, tex_err
+    probe, n_valid: int, counts, rho_d, b, F, model_f, n_per, x_scan, res: ScanlineFit, comb: CombinedFit, tex_err
 ) -> dict:
     """Pixel counts by mask reason, scanline status counts, error models side by side, residuals, texture."""
     if comb.covariance_robust is None or comb.covariance_model is None:  # only a fit without data lacks them
         raise ValueError("the joint fit carries no covariances to report")
-    h, w = rec.probe.shape
-    probe = rec.probe
+    h, w = probe.shape
     resid = F - model_f
     ok = np.isfinite(resid)
     rms = float(np.sqrt(np.mean(resid[ok] ** 2)))
     mean_f = float(np.mean(F[ok]))
     tex_ok = np.all(np.isfinite(rho_d), axis=-1)
     names, cnt = np.unique(res.status_names, return_counts=True)
-    n_valid = int((probe & np.all(np.isfinite(rec.f_r), axis=-1)).sum())
     return {
         "pixels": {"image": h * w, "probe": int(probe.sum()), "valid": n_valid, **counts},
         "binning": b,
@@ -290,6 +323,8 @@ def _diagnostics(
             "count": int(len(F)),
             "samples": int(np.sum(n_per)),
             "status": {str(k): int(c) for k, c in zip(names, cnt)},
+            # which standard errors of ρs and α each scanline fit reports (ScanlineFit.errors)
+            "errors": {m: int(np.sum(res.errors == m)) for m in ("gauss_newton", "profile")},
             "alpha_median": float(np.nanmedian(res.params.alpha_x)),
             "rho_s_median": float(np.nanmedian(res.params.rho_s)),
             "x_range_mm": [float(np.min(x_scan)), float(np.max(x_scan))],
@@ -305,6 +340,17 @@ def _diagnostics(
             "std": [float(c) for c in np.std(rho_d[tex_ok], axis=0)] if tex_ok.any() else [float("nan")] * 3,
         },
     }
+
+
+def _fit_map(F, model_f, keep, bins) -> dict:
+    """Measured and fitted ``f_r`` on the image grid of the bins (scanlines are image columns)."""
+    n_cols, n_rows = len(keep), F.shape[1]
+    f_img = np.full((n_rows, n_cols, 3), np.nan, np.float32)
+    m_img = np.full((n_rows, n_cols, 3), np.nan, np.float32)
+    f_img[:, keep] = F.transpose(1, 0, 2)
+    m_img[:, keep] = np.where(np.isfinite(F), model_f, np.nan).transpose(1, 0, 2)
+    rows, cols = bins.box
+    return {"f_r": f_img, "model": m_img, "binning": int(bins.b), "origin": (int(rows.start), int(cols.start))}
 
 
 def _profile(F, Y, model_f, spec, n_per, x_scan) -> dict:

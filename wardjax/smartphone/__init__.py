@@ -49,7 +49,10 @@ from ._method import fit_smartphone as fit_smartphone
 from ._threshold_model import CSF_METHODS as CSF_METHODS
 from ._threshold_model import csf_sensitivity as csf_sensitivity
 from ._threshold_model import CSFFit as CSFFit
+from ._threshold_model import CSF_CALIBRATIONS as CSF_CALIBRATIONS
+from ._threshold_model import fit_csf_gratings as fit_csf_gratings
 from ._threshold_model import fit_csf_modelfest as fit_csf_modelfest
+from ._threshold_model import load_csf_gratings as load_csf_gratings
 from ._threshold_model import load_modelfest as load_modelfest
 from ._threshold_model import lobe_sd_from_threshold as lobe_sd_from_threshold
 from ._threshold_model import screen_view_factor as screen_view_factor
@@ -106,10 +109,13 @@ __all__ = [
     "lobe_sd_from_gonio",
     "lobe_sd_percent_error",
     "fit_smartphone",
+    "CSF_CALIBRATIONS",
     "CSF_METHODS",
     "csf_sensitivity",
     "CSFFit",
+    "fit_csf_gratings",
     "fit_csf_modelfest",
+    "load_csf_gratings",
     "load_modelfest",
     "lobe_sd_from_threshold",
     "screen_view_factor",

@@ -216,6 +216,9 @@ def fit_camera_correction(
 ) -> CameraCorrection:
     """Fit a :class:`CameraCorrection` to chart patches with colour-science's characterisation.
 
+    The references are taken to linear RGB (sRGB primaries, white E) through CIELAB D50, and
+    ``colour.matrix_colour_correction`` fits ``M`` by least squares on those values.
+
     Parameters
     ----------
     rho_d
@@ -230,9 +233,6 @@ def fit_camera_correction(
         First fit the tone exponent γ: a straight line of log reference luminance against
         log camera luminance through the neutral patches among ``rho_d`` (reference
         C*ab < 4); else γ = 1.
-
-    The references are taken to linear RGB (sRGB primaries, white E) through CIELAB D50, and
-    ``colour.matrix_colour_correction`` fits ``M`` by least squares on those values.
     """
     x = np.asarray(rho_d, dtype=np.float64)
     ref = np.asarray(reference_Lab, dtype=np.float64)

@@ -30,9 +30,11 @@ Threshold
     width of that frequency, :func:`wardjax.smartphone.cpd_to_ppb`.
 
 Constants
-    Each CSF's few constants are fitted to the 14 ModelFest thresholds
-    (``calibration/csf_modelfest.csv``; Gabors at 30 cd/m²) by least squares on log10
-    sensitivity, never on the smartphone paper's Table 1. Barten: the signal-to-noise
+    Each CSF's few constants are fitted by least squares on log10 sensitivity to castleCSF
+    data, never to the smartphone paper's Table 1: by default to Rovamo et al.'s (1993)
+    gratings of varying area (``calibration/csf_rovamo1993.csv``; 50 cd/m²), the stimulus
+    the phone shows; or to the 14 ModelFest thresholds (``calibration/csf_modelfest.csv``;
+    small Gabors at 30 cd/m²), whose fit extrapolates badly to a full-field grating. Barten: the signal-to-noise
     ratio ``k``, the eye's optical blur ``σ0`` (arcmin; ``σ = √(σ0² + (0.08 arcmin/mm · d)²)``
     with ``d`` the pupil diameter) and the factor ``a`` from Gabor envelope SD to Barten's
     field size (``X_0 = a · σ_gabor``). Mannos–Sakrison: an overall scale ``A`` and a
@@ -57,19 +59,23 @@ __all__ = [
     "CSF_METHODS",
     "CSFFit",
     "csf_sensitivity",
+    "CSF_CALIBRATIONS",
+    "fit_csf_gratings",
     "fit_csf_modelfest",
     "lobe_sd_from_threshold",
+    "load_csf_gratings",
     "load_modelfest",
     "screen_view_factor",
     "threshold_ppb",
 ]
 
 CSF_METHODS: tuple[str, ...] = ("Barten 1999", "Mannos 1974")
+CSF_CALIBRATIONS: tuple[str, ...] = ("gratings", "modelfest")
 _MM_PER_IN = 25.4
 
 
 class CSFFit(NamedTuple):
-    """A CSF with its constants fitted to ModelFest, and the fit's RMS error of log10 S."""
+    """A CSF with its constants fitted to castleCSF data, and the fit's RMS error of log10 S."""
 
     method: str
     constants: tuple[float, ...]
@@ -87,6 +93,19 @@ def load_modelfest() -> dict[str, NDArray]:
         "sensitivity": "sensitivity",
     }
     return {k: np.array([float(r[c]) for r in rows]) for k, c in col.items()}
+
+
+def load_csf_gratings() -> dict[str, NDArray]:
+    """Rovamo et al. (1993) gratings: ``luminance``, ``frequency`` (cpd), ``size`` (deg, √area), ``sensitivity``."""
+    with open(calibration_path("csf_rovamo1993.csv"), encoding="utf-8") as fh:
+        rows = list(csv.DictReader(r for r in fh if not r.startswith("#")))
+    out = {
+        "luminance": np.array([float(r["luminance_cd_m2"]) for r in rows]),
+        "frequency": np.array([float(r["s_frequency_cpd"]) for r in rows]),
+        "size": np.sqrt(np.array([float(r["area_deg2"]) for r in rows])),
+        "sensitivity": np.array([float(r["sensitivity"]) for r in rows]),
+    }
+    return out
 
 
 def csf_sensitivity(
@@ -117,25 +136,51 @@ def csf_sensitivity(
     raise ValueError(f"CSF method must be one of {CSF_METHODS}; got {fit.method!r}")
 
 
-@cache
-def fit_csf_modelfest(method: str = "Barten 1999") -> CSFFit:
-    """Fit a CSF's constants to the ModelFest thresholds (least squares on log10 S; cached)."""
+def _fit_csf(method: str, data: dict[str, NDArray], size: NDArray) -> CSFFit:
+    """Least squares on log10 S; Barten's field size is ``X_0 = a · size`` (``a`` fitted)."""
     from scipy.optimize import least_squares
 
     if method not in CSF_METHODS:
         raise ValueError(f"CSF method must be one of {CSF_METHODS}; got {method!r}")
-    mf = load_modelfest()
-    target = np.log10(mf["sensitivity"])
+    target = np.log10(data["sensitivity"])
 
     def residual(p):
         c = tuple(float(v) for v in np.exp(p))
-        x0 = c[2] * mf["sigma"] if method == "Barten 1999" else mf["sigma"]
-        s = csf_sensitivity(mf["frequency"], mf["luminance"], x0, CSFFit(method, c, np.nan))
+        x0 = c[2] * size if method == "Barten 1999" else size
+        s = csf_sensitivity(data["frequency"], data["luminance"], x0, CSFFit(method, c, np.nan))
         return np.log10(s) - target
 
     p0 = np.log([3.0, 0.5, 2.0]) if method == "Barten 1999" else np.log([100.0, 1.0])
     sol = least_squares(residual, p0)
     return CSFFit(method, tuple(float(v) for v in np.exp(sol.x)), float(np.sqrt(np.mean(sol.fun**2))))
+
+
+@cache
+def fit_csf_modelfest(method: str = "Barten 1999") -> CSFFit:
+    """Fit a CSF's constants to the ModelFest thresholds (least squares on log10 S; cached)."""
+    mf = load_modelfest()
+    return _fit_csf(method, mf, mf["sigma"])
+
+
+@cache
+def fit_csf_gratings(method: str = "Barten 1999") -> CSFFit:
+    """Fit a CSF's constants to Rovamo et al.'s (1993) gratings of varying area (log10 S; cached).
+
+    Sine gratings filling square apertures of 0.003–980 deg² at 50 cd/m² (castleCSF's
+    ``rovamo1993``, ``calibration/csf_rovamo1993.csv``): the stimulus the phone shows
+    (a grating filling the reflected screen), unlike ModelFest's small Gabor patches.
+    Barten's field size is ``X_0 = a · √area``.
+    """
+    g = load_csf_gratings()
+    return _fit_csf(method, g, g["size"])
+
+
+def _resolve_csf(csf: CSFFit | str, calibration: str) -> CSFFit:
+    if not isinstance(csf, str):
+        return csf
+    if calibration not in CSF_CALIBRATIONS:
+        raise ValueError(f"CSF calibration must be one of {CSF_CALIBRATIONS}; got {calibration!r}")
+    return fit_csf_gratings(csf) if calibration == "gratings" else fit_csf_modelfest(csf)
 
 
 def _screen_frame(display: Display, viewing: Viewing):
@@ -174,6 +219,7 @@ def threshold_ppb(
     *,
     rho_s: float = 0.05,
     csf: CSFFit | str = "Barten 1999",
+    calibration: str = "gratings",
     ambient_cd_m2: float = 0.0,
     display: str | Display = "iphone5s",
     viewing: str | Viewing = "paper",
@@ -183,10 +229,12 @@ def threshold_ppb(
     Solves ``C(f) S(f, L) = 1`` for the highest visible frequency by bisection in log f
     (see the module docstring). Returns continuous PPB, clipped to the display's range
     ``[ppb_min, ppb_max]``: a grating visible at 1 PPB gives ``ppb_min``, one invisible at
-    ``ppb_max`` gives ``ppb_max``.
+    ``ppb_max`` gives ``ppb_max``. A method name in ``csf`` takes its constants from
+    ``calibration``: ``"gratings"`` (default, :func:`fit_csf_gratings`) or ``"modelfest"``
+    (:func:`fit_csf_modelfest`).
     """
     disp, view = load_display(display), load_viewing(viewing)
-    fit = fit_csf_modelfest(csf) if isinstance(csf, str) else csf
+    fit = _resolve_csf(csf, calibration)
     sd, rd = np.broadcast_arrays(np.asarray(lobe_sd_deg, np.float64), np.asarray(rho_d, np.float64))
     _, e1, e2, _, d = _screen_frame(disp, view)
     size = np.rad2deg(min(np.linalg.norm(e1), np.linalg.norm(e2)) / view.eye_to_screen_mm)
@@ -222,7 +270,7 @@ def lobe_sd_from_threshold(
 
     The predicted PPB rises monotonically with the lobe SD, so bisection in log SD over
     ``sd_range_deg`` (60 halvings) inverts it; ``model`` passes ``rho_s``, ``csf``,
-    ``ambient_cd_m2``, ``display`` and ``viewing`` through. A PPB at or below the mirror's
+    ``calibration``, ``ambient_cd_m2``, ``display`` and ``viewing`` through. A PPB at or below the mirror's
     threshold gives the range's low end, one above the range's prediction its high end.
     """
     target, rd = np.broadcast_arrays(np.asarray(ppb, np.float64), np.asarray(rho_d, np.float64))

@@ -2,14 +2,13 @@
 
 from __future__ import annotations
 
-import functools
-
 import jax
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
 from ._histogram import quantile_probabilities
+from ._jit import texture_jit
 from ._model import TextureModel
 from ._pyramid import (
     ORIENTATIONS,
@@ -80,7 +79,7 @@ def _rho_s_vector(rho_s, channels: int, name: str = "rho_s") -> np.ndarray:
     return r
 
 
-@jax.jit
+@texture_jit
 def _pixel_moments(x: Float[Array, "h w c"]) -> tuple[Float[Array, " c"], Float[Array, "c c"]]:
     """Mean and sample covariance (divided by ``n − 1``, as ``np.cov``) of the pixels of ``x`` (float64)."""
     p = x.reshape(-1, x.shape[-1])
@@ -107,7 +106,7 @@ def _groups(subbands, c: int) -> tuple:
     return tuple(b.reshape(c, 1, -1) for b in subbands)
 
 
-@functools.partial(jax.jit, static_argnames="shapes")
+@texture_jit(static_argnames="shapes")
 def _analysis_groups(x, mean, axis, masks, shapes):
     """One decorrelated channel ``d = (x − μ) · axis`` (float32) → periodic component → pyramid → subband groups,
     then the pixels ``(1, 1, H W)``."""
@@ -134,6 +133,7 @@ def analyze_texture(
     height: int | None = None,
     n_quantiles: int = 129,
     rho_s=0.0,
+    max_side: int | None = None,
 ) -> TextureModel:
     """Parametric description of a ρd texture (image-based paper, section 4.2; Heeger & Bergen 1995).
 
@@ -160,6 +160,12 @@ def analyze_texture(
     rho_s
         Specular reflectance of the material (scalar or per channel); synthesis
         clamps ρd to ``[0, 1 − ρs]`` (energy conservation).
+    max_side
+        If given, a region (step 1) longer than this on a side is cut to its
+        centred ``max_side``-long part (``region_source`` says so): the model
+        keeps quantiles, which a few million pixels determine as well as tens
+        of millions, while the pyramid's memory grows with the pixels
+        (:func:`wardjax.write_capture_outputs` uses 2048 for big captures).
 
     Returns
     -------
@@ -188,6 +194,11 @@ def analyze_texture(
         y0, y1, x0, x1 = largest_valid_rectangle(~bad.any(axis=-1))
         source = "largest valid rectangle"
     rh, rw = y1 - y0, x1 - x0
+    if max_side is not None and max(rh, rw) > max_side:
+        y0, x0 = y0 + max(rh - max_side, 0) // 2, x0 + max(rw - max_side, 0) // 2
+        y1, x1 = y0 + min(rh, max_side), x0 + min(rw, max_side)
+        rh, rw = y1 - y0, x1 - x0
+        source = f"{source}, centred {rh}x{rw} part"
     if min(rh, rw) < _MIN_SIDE:
         raise ValueError(
             f"the analysed region (rows {y0}:{y1}, columns {x0}:{x1}, {source}) is {rh}x{rw} pixels; "

@@ -7,8 +7,6 @@ normalisation the fit used).
 
 from __future__ import annotations
 
-import functools
-
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -21,6 +19,7 @@ from ..ward import (
     ward_geometry,
     ward_specular,
 )
+from ._jit import texture_jit
 
 __all__ = ["RHO_D_RANGE", "extract_rho_d"]
 
@@ -32,7 +31,7 @@ RHO_D_RANGE = (0.0, 1.0)
 _REJECT_MARGIN = 0.05
 
 
-@functools.partial(jax.jit, static_argnames="normalization")
+@texture_jit(static_argnames="normalization")
 def _extract(f_r, wi, wo, params, normalization):
     geom = ward_geometry(wi, wo, normalization)
     spec = ward_specular(geom, params.alpha_x, params.alpha_y)[..., None]

@@ -32,6 +32,8 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
+from ._jit import texture_jit
+
 __all__ = [
     "ORIENTATIONS",
     "max_pyramid_height",
@@ -154,7 +156,7 @@ def _pad(z: Array, shape: tuple[int, int]) -> Array:
     return jnp.pad(rows, [(0, 0)] * (rows.ndim - 1) + [(0, m_big // 2 + 1 - z.shape[-1])])
 
 
-@functools.partial(jax.jit, static_argnames="shapes")
+@texture_jit(static_argnames="shapes")
 def pyramid_build(
     x: Float[Array, "c h w"], masks: dict, shapes: tuple[tuple[int, int], ...]
 ) -> tuple[Float[Array, "c h w"], tuple[Float[Array, "c 4 hl wl"], ...], Float[Array, "c hL wL"]]:
@@ -193,7 +195,7 @@ def pyramid_subbands(spec, masks: dict, shapes: tuple[tuple[int, int], ...]) -> 
     return tuple(out)
 
 
-@functools.partial(jax.jit, static_argnames="shapes")
+@texture_jit(static_argnames="shapes")
 def pyramid_reconstruct(
     highpass: Float[Array, "c h w"],
     bands: tuple[Float[Array, "c 4 _ _"], ...],
@@ -224,7 +226,7 @@ def pyramid_collapse(subbands, masks: dict, shapes: tuple[tuple[int, int], ...])
     return jnp.fft.irfft2(spec, s=shapes[0], norm="forward")
 
 
-@jax.jit
+@texture_jit
 def periodic_spectrum(u: Float[Array, "c h w"]):
     """``rfft2(p, norm="forward")`` of the periodic component ``p`` of :func:`periodic_smooth`, without forming ``s``.
 
@@ -247,7 +249,7 @@ def periodic_spectrum(u: Float[Array, "c h w"]):
     return (jnp.fft.rfft2(u) - s_hat) / (n * m)
 
 
-@jax.jit
+@texture_jit
 def periodic_smooth(u: Float[Array, "c h w"]) -> tuple[Float[Array, "c h w"], Float[Array, "c h w"]]:
     """Moisan's (2011) periodic + smooth decomposition ``u = p + s`` of a batch of images.
 

@@ -13,6 +13,8 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
+from ._jit import texture_jit
+
 #
 # Exact matching gives the k-th smallest of n values the target quantile at
 # probability (k + 1/2) / n. Ranks come from one sort of distinct 64-bit keys
@@ -145,7 +147,7 @@ def _rank_host(values, targets, picks, workers: int | None = None):
     )
 
 
-@jax.jit
+@texture_jit
 def _rank_xla(values, targets, picks):
     """:func:`_rank_match` in XLA (``lax.sort`` of integer keys in the host keys' order: the same permutation).
 

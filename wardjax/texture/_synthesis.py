@@ -2,16 +2,20 @@
 
 from __future__ import annotations
 
-import functools
+import concurrent.futures
+import os
 from collections.abc import Callable
+from typing import cast
 
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
 
+from . import _binned
 from ._analysis import _groups, _rho_s_vector, _subband_shapes
 from ._histogram import _ks_picks, _ks_sorted, _targets
+from ._jit import texture_jit
 from ._model import TextureModel
 from ._pyramid import (
     pyramid_collapse,
@@ -50,14 +54,14 @@ class SynthesisResult(eqx.Module):
     seed: int = eqx.field(static=True)
 
 
-@functools.partial(jax.jit, static_argnames="shapes")
+@texture_jit(static_argnames="shapes")
 def _build_groups(d, masks, shapes):
     """Pyramid of the pixels ``d`` (``(C, 1, H W)``) as sorting groups (:func:`_groups`)."""
     c = d.shape[0]
     return _groups(pyramid_subbands(jnp.fft.rfft2(d.reshape(c, *shapes[0]), norm="forward"), masks, shapes), c)
 
 
-@functools.partial(jax.jit, static_argnames="shapes")
+@texture_jit(static_argnames="shapes")
 def _collapse(groups, masks, shapes):
     """Inverse of :func:`_build_groups`: collapse matched subband groups into pixels ``(C, 1, H W)``."""
     c = groups[0].shape[0]
@@ -65,7 +69,7 @@ def _collapse(groups, masks, shapes):
     return pyramid_collapse(subbands, masks, shapes).reshape(c, 1, -1)
 
 
-@functools.partial(jax.jit, static_argnames="sizes")
+@texture_jit(static_argnames="sizes")
 def _band_ks(picked, tables, probs, sizes):
     """KS distance ``(C, B)`` of every subband from its every-s-th order statistics (:func:`_ks_sorted`)."""
     return jnp.concatenate([_ks_sorted(p, t, probs, n) for p, t, n in zip(picked, tables, sizes)], axis=-1)
@@ -131,7 +135,62 @@ def _heeger_bergen(rng, band_q, pixel_q, probs64, masks, shapes, iterations: int
     return ds, ks
 
 
-@jax.jit
+def _heeger_bergen_binned(rng, band_q, pixel_q, probs64, shapes, iterations: int, progress, devices):
+    """:func:`_heeger_bergen` with Heeger & Bergen's binned matching (:mod:`~wardjax.texture._binned`), all in XLA.
+
+    The same noise stream and iterations; the KS distances are measured from
+    the bin counts. With several ``devices`` (or one accelerator) the
+    channels, padded to a multiple of their number, are split over them along
+    the channel axis (``NamedSharding`` over a 1-D mesh; the channels are
+    independent, so no device waits for another). On one CPU device each
+    channel is its own (single-threaded) program, the channels run side by
+    side on a thread pool. Returns the ``C`` channels ``(1, 1, H W)``
+    (NumPy) and the KS distances ``(iterations + 1, C, B)``.
+    """
+    c, n_pix = pixel_q.shape[0], shapes[0][0] * shapes[0][1]
+    noise = [rng.standard_normal((1, n_pix), dtype=np.float32) for _ in range(c)]  # the exact path's stream
+    mesh = jax.sharding.Mesh(np.asarray(devices), ("channel",))
+    split = jax.sharding.NamedSharding(mesh, jax.sharding.PartitionSpec("channel"))
+    shared = jax.sharding.NamedSharding(mesh, jax.sharding.PartitionSpec())
+    if len(devices) == 1 and devices[0].platform == "cpu":
+        groups = [[ch] for ch in range(c)]  # one program per channel, side by side on the host's threads
+    else:
+        groups = [[min(ch, c - 1) for ch in range(-(-c // len(devices)) * len(devices))]]
+    put = lambda a: jax.device_put(np.ascontiguousarray(a), split)
+    masks = jax.device_put(_device_masks(shapes[0], len(shapes) - 1, "float32"), shared)
+    probs = jax.device_put(np.asarray(probs64, np.float32), shared)
+    tables, ds = [], []
+    for chans in groups:
+        tables.append(
+            (
+                tuple(put(_binned.quantile_lookup(band_q[chans, b], probs64)) for b in range(band_q.shape[1])),
+                tuple(put(band_q[chans, b].astype(np.float32)) for b in range(band_q.shape[1])),
+                put(_binned.quantile_lookup(pixel_q[chans], probs64)),
+                masks,
+                probs,
+            )
+        )
+        ds.append(put(np.stack([noise[ch] for ch in chans])))
+
+    def step(g: int, **kw):
+        out = _binned.iteration(ds[g], *tables[g], shapes=shapes, mesh=mesh, **kw)
+        return jax.block_until_ready(out)
+
+    ks = []
+    with concurrent.futures.ThreadPoolExecutor(min(len(groups), os.cpu_count() or 1)) as pool:
+        for it in range(-1, iterations + 1):
+            kw = {"start": True} if it < 0 else {"final": it == iterations}
+            out = list(pool.map(lambda g: step(g, **kw), range(len(groups))))
+            ds = [d for d, _ in out]
+            if it >= 0:
+                ks.append(np.concatenate([np.asarray(k, np.float64) for _, k in out])[:c])
+            if progress is not None and 0 <= it < iterations:
+                progress(it + 1, iterations)
+    host = np.concatenate([np.asarray(d) for d in ds])
+    return [host[ch : ch + 1] for ch in range(c)], np.stack(ks)
+
+
+@texture_jit
 def _channel_moments(ds):
     """Mean ``(C,)`` and covariance ``(C, C)`` (float64, divided by ``n``) of the channels ``ds``.
 
@@ -167,12 +226,44 @@ def _decorrelation(cov: np.ndarray) -> np.ndarray:
     return w
 
 
-@jax.jit
+@texture_jit
 def _to_rgb(ds, mix, offset, upper):
     """``clip(mix d + offset, 0, upper)`` per pixel, channels last: ``(n, K)`` float32."""
     d = jnp.concatenate([x.reshape(1, -1) for x in ds])
     rgb = jnp.einsum("kc,cn->nk", mix.astype(d.dtype), d) + offset.astype(d.dtype)[None]
     return jnp.clip(rgb, 0.0, upper.astype(d.dtype)[None])
+
+
+def _check_args(model, shape, iterations, seed, match, sort) -> tuple[int, int]:
+    """Refuse bad arguments of :func:`synthesize_texture` with one line each; the shape as two ints."""
+    if not isinstance(model, TextureModel):
+        raise TypeError(f"model must be a TextureModel, got {type(model).__name__}")
+    try:
+        hh, ww = (int(s) for s in shape)
+    except (TypeError, ValueError):
+        raise ValueError(f"shape={shape!r}, expected (height, width)") from None
+    if (hh, ww) != tuple(shape) or min(hh, ww) < 1:
+        raise ValueError(f"shape={shape!r}, expected two positive integers (height, width)")
+    if hh * ww > _MAX_ROW:
+        raise ValueError(f"shape={shape!r} has {hh * ww} pixels; at most 2**{_POSITION_BITS} can be synthesised")
+    need = 2 ** (model.height + 2)
+    if min(hh, ww) < need:
+        raise ValueError(
+            f"shape={shape!r} is too small for a texture analysed with {model.height} pyramid levels: "
+            f"each side must be at least {need} pixels"
+        )
+    if isinstance(iterations, bool) or not isinstance(iterations, (int, np.integer)) or iterations < 1:
+        raise ValueError(f"iterations={iterations!r}, expected an integer >= 1")
+    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
+        raise ValueError(f"seed={seed!r}, expected an integer >= 0")
+    if match not in MATCHES:
+        raise ValueError(f"match={match!r}, expected 'binned' or 'exact'")
+    if sort not in ("auto", "numpy", "xla"):
+        raise ValueError(f"sort={sort!r}, expected 'auto', 'numpy' or 'xla'")
+    return hh, ww
+
+
+MATCHES = ("binned", "exact")
 
 
 def synthesize_texture(
@@ -182,7 +273,9 @@ def synthesize_texture(
     seed: int = 0,
     iterations: int = 5,
     rho_s=None,
+    match: str = "binned",
     sort: str = "auto",
+    devices=None,
     progress: Callable[[int, int], None] | None = None,
 ) -> SynthesisResult:
     """Synthesise a texture of any size from a :class:`TextureModel` (Heeger & Bergen 1995, paper section 4.2).
@@ -191,8 +284,9 @@ def synthesize_texture(
     pixels are matched to the model's pixel histogram, each iteration
 
     1. builds the steerable pyramid of the current image,
-    2. matches every subband's histogram exactly to the model's quantiles
-       (:func:`match_histogram`),
+    2. matches every subband's histogram to the model's quantiles
+       (``match``: Heeger & Bergen's binned CDFs and lookup, O(N), or the
+       exact sort-based :func:`match_histogram`),
     3. collapses the pyramid and matches the pixel histogram.
 
     Channels are then mixed back to RGB (``x = V d + μ``) and clamped to
@@ -215,9 +309,23 @@ def synthesize_texture(
         Histogram-matching iterations (≥ 1; the paper used 3).
     rho_s
         Override the model's specular reflectance for the clamp.
+    match
+        ``"binned"`` (default): the paper's histogram matching, binned
+        cumulative histograms and a lookup table, O(N) per subband, in XLA
+        (:mod:`wardjax.texture._binned`); the reported KS distances are read
+        from the bin counts. ``"exact"``: rank matching by sorting, the
+        sorted output equals the target quantiles (``sort`` picks where the
+        sort runs). Both meet the same statistical bars (subband KS ≤ 0.05
+        against the source, mean and variance within 2 %); ``"binned"`` is
+        several times faster.
     sort
-        ``"auto"`` (NumPy on CPU, XLA elsewhere), ``"numpy"`` or ``"xla"``; all
-        give identical results.
+        For ``match="exact"``: ``"auto"`` (NumPy on CPU, XLA elsewhere),
+        ``"numpy"`` or ``"xla"``; all give identical results.
+    devices
+        For ``match="binned"``: the JAX devices to spread the channels over
+        (``NamedSharding`` over a 1-D mesh, channel axis); default
+        ``jax.devices()``. Channels are independent, so the image is the same
+        on one device or several.
     progress
         Called as ``progress(k, iterations)`` when iteration ``k`` is done (the
         CLI draws its progress bar with it).
@@ -226,45 +334,26 @@ def synthesize_texture(
     -------
     SynthesisResult
     """
-    if not isinstance(model, TextureModel):
-        raise TypeError(f"model must be a TextureModel, got {type(model).__name__}")
-    try:
-        hh, ww = (int(s) for s in shape)
-    except (TypeError, ValueError):
-        raise ValueError(f"shape={shape!r}, expected (height, width)") from None
-    if (hh, ww) != tuple(shape) or min(hh, ww) < 1:
-        raise ValueError(f"shape={shape!r}, expected two positive integers (height, width)")
-    if hh * ww > _MAX_ROW:
-        raise ValueError(f"shape={shape!r} has {hh * ww} pixels; at most 2**{_POSITION_BITS} can be synthesised")
-    need = 2 ** (model.height + 2)
-    if min(hh, ww) < need:
-        raise ValueError(
-            f"shape={shape!r} is too small for a texture analysed with {model.height} pyramid levels: "
-            f"each side must be at least {need} pixels"
-        )
-    if isinstance(iterations, bool) or not isinstance(iterations, (int, np.integer)) or iterations < 1:
-        raise ValueError(f"iterations={iterations!r}, expected an integer >= 1")
-    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
-        raise ValueError(f"seed={seed!r}, expected an integer >= 0")
-    if sort not in ("auto", "numpy", "xla"):
-        raise ValueError(f"sort={sort!r}, expected 'auto', 'numpy' or 'xla'")
+    hh, ww = _check_args(model, shape, iterations, seed, match, sort)
+    devices = list(jax.devices() if devices is None else devices)
+    if not devices or not all(isinstance(d, jax.Device) for d in devices):
+        raise ValueError(f"devices={devices!r}, expected a non-empty sequence of jax.Device")
     c = model.channels
     rs = model.rho_s if rho_s is None else _rho_s_vector(rho_s, c)
     shapes = pyramid_shapes((hh, ww), model.height)
 
     with jax.enable_x64(True):
-        masks = _device_masks((hh, ww), model.height, "float32")
-        ds, ks = _heeger_bergen(
-            np.random.default_rng(int(seed)),
+        tables = (
             np.asarray(model.band_quantiles, np.float64),
             np.asarray(model.pixel_quantiles, np.float64),
             np.asarray(model.probabilities, np.float64),
-            masks,
-            shapes,
-            iterations,
-            sort,
-            progress,
         )
+        rng = np.random.default_rng(int(seed))
+        if match == "binned":
+            ds, ks = _heeger_bergen_binned(rng, *tables, shapes, iterations, progress, devices)
+        else:
+            masks = _device_masks((hh, ww), model.height, "float32")
+            ds, ks = _heeger_bergen(rng, *tables, masks, shapes, iterations, cast(SortMethod, sort), progress)
         mu, cov = (np.asarray(a) for a in _channel_moments(ds))
         # x = V (μ + W (d − μ)) + m: decorrelate, back to RGB, clamp, in one pass over the pixels.
         mix = model.pca_basis @ _decorrelation(cov)
