@@ -267,9 +267,9 @@ def fit_scanlines(
     devices = _check_devices(devices)
     chunk = int(chunk_size or _default_chunk(dtype, devices))
     data = (f, wi, wo, mask, weights)
+    kw = dict(iso=iso, normalization=normalization, solver=solver, devices=devices)
     check = errors == "auto"
-    kw = dict(iso=iso, normalization=normalization, solver=solver, devices=devices, check=check)
-    sol = _solve(data, dtype=dtype, chunk=chunk, **kw)
+    sol = _solve(data, dtype=dtype, chunk=chunk, check=check, **kw)
     if dtype == np.float32 and solver == "fast":
         # A float32 fit that is not certified (rounding can cancel the
         # algebraic centring into a spurious optimum: ~3 in 10⁴ scanlines with
@@ -277,7 +277,9 @@ def fit_scanlines(
         redo = np.flatnonzero(np.isin(sol.status, (Status.MAX_STEPS, Status.NONFINITE)))
         if redo.size:
             sub = tuple(None if a is None else a[redo] for a in data)
-            again = _solve(sub, dtype=np.dtype(np.float64), chunk=_default_chunk(np.float64, devices), **kw)
+            again = _solve(
+                sub, dtype=np.dtype(np.float64), chunk=_default_chunk(np.float64, devices), check=check, **kw
+            )
             for full, part in zip(sol, again):
                 full[redo] = part
     if solver == "fast" and iso and errors != "gauss_newton":
