@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import contextlib
 import hashlib
+import io
 import json
 import math
 import os
@@ -258,32 +259,43 @@ def read_image(path, *, rgb: bool = True) -> np.ndarray:
     """Read an image file as stored: ``(H, W, 3)`` uint8/uint16 (raw files: linear uint16).
 
     Grey images are repeated over RGB and an alpha channel is dropped (see
-    :func:`as_rgb`); ``rgb=False`` returns the channels as stored. Raises
-    ``OSError``/``ValueError`` from the readers on unreadable files.
+    :func:`as_rgb`); ``rgb=False`` returns the channels as stored. A file that
+    cannot be opened raises ``OSError``; one that cannot be decoded (truncated,
+    garbled, not an image) raises ``ValueError`` with the reader's first line,
+    whatever the reader raised (decoders of corrupt data raise a zoo of errors:
+    ``struct.error``, ``IndexError``, ``EOFError``, ``zlib.error``…).
     """
     path = Path(path)
     suffix = path.suffix.lower()
-    if suffix in (".tif", ".tiff"):
-        import tifffile
+    data = None if suffix in RAW_SUFFIXES else path.read_bytes()  # OSError: the file, not its contents
+    try:
+        img = _decode(path, suffix, data)
+    except Exception as e:  # any decoder failure is a corrupt file to the user
+        reason = (str(e).strip().splitlines() or [type(e).__name__])[0][:160]
+        raise ValueError(reason) from None
+    return as_rgb(img) if rgb else img
 
-        img = tifffile.imread(path)
-    elif suffix in RAW_SUFFIXES:
+
+def _decode(path: Path, suffix: str, data: bytes | None) -> np.ndarray:
+    if data is None:
         import rawpy
 
         with rawpy.imread(str(path)) as raw:
-            img = raw.postprocess(
+            return raw.postprocess(
                 gamma=(1, 1), no_auto_bright=True, output_bps=16, use_camera_wb=True, output_color=rawpy.ColorSpace.sRGB
             )
-    elif suffix == ".png":
+    if suffix in (".tif", ".tiff"):
+        import tifffile
+
+        return np.asarray(tifffile.imread(io.BytesIO(data)))
+    if suffix == ".png":
         import imagecodecs  # Pillow (imageio's default) reduces 16-bit RGB PNG to 8 bits
 
-        img = imagecodecs.png_decode(path.read_bytes())
-    else:
-        import imageio.v3 as iio
+        return np.asarray(imagecodecs.png_decode(data))
+    import imageio.v3 as iio
 
-        img = iio.imread(path)
-    img = np.asarray(img)
-    return as_rgb(img) if rgb else img
+    # Pillow alone: imageio would otherwise try every plugin it knows on a file Pillow cannot read.
+    return np.asarray(iio.imread(data, plugin="pillow"))
 
 
 def as_rgb(img: np.ndarray) -> np.ndarray:

@@ -23,6 +23,7 @@ from ._rules import check_photo_region as check_photo_region
 from ._rules import check_position as check_position
 from ._rules import check_rho_d_map as check_rho_d_map
 from ._rules import check_ward_params as check_ward_params
+from ._rules import one_line as one_line
 
 __all__ = [
     "CAPTURE_FILE",
@@ -48,4 +49,5 @@ __all__ = [
     "check_position",
     "check_rho_d_map",
     "check_ward_params",
+    "one_line",
 ]

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import pydantic
 
+from ._rules import one_line
+
 __all__ = ["CAPTURE_FILE", "CaptureError", "pydantic_error"]
 
 CAPTURE_FILE = "capture.toml"
@@ -21,11 +23,12 @@ class CaptureError(ValueError):
     """
 
     def __init__(self, file: str, field: str | None, message: str):
-        self.file = file
-        self.field = field
-        self.message = message
-        where = f"{file}: {field}: " if field else f"{file}: "
-        super().__init__(where + message)
+        # Names read from the input (a TOML key, an image path) may hold line breaks: shown escaped, on one line.
+        self.file = one_line(file)
+        self.field = None if field is None else one_line(field)
+        self.message = one_line(message)
+        where = f"{self.file}: {self.field}: " if field else f"{self.file}: "
+        super().__init__(where + self.message)
 
 
 def _fmt_loc(loc) -> str:

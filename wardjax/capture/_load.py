@@ -11,8 +11,8 @@ from .._files import RAW_SUFFIXES, as_rgb, decode_lut, read_image, sha256
 from ..geometry import Camera, Rig
 from ._errors import CAPTURE_FILE, CaptureError
 from ._rules import RuleError, check_image_pair, check_lit_exposure
-from ._schema import CaptureFile, parse_capture_file
-from ._smartphone import SmartphoneCapture, load_smartphone_capture
+from ._schema import CaptureFile, parse_capture_file, unit_direction
+from ._smartphone import SmartphoneCapture, check_relative, load_smartphone_capture
 
 __all__ = ["IMAGE_SUFFIXES", "Capture", "load_capture"]
 
@@ -59,9 +59,8 @@ class Capture:
 
     @property
     def tangent(self) -> tuple[float, float]:
-        t = np.asarray(self.config.material.tangent, float)
-        t = t / np.linalg.norm(t)
-        return (float(t[0]), float(t[1]))
+        t = unit_direction(self.config.material.tangent)
+        return (t[0], t[1])
 
     @property
     def rho_standard(self) -> np.ndarray:
@@ -70,8 +69,7 @@ class Capture:
 
 def _load_image(folder: Path, name: str, field: str, cfg: CaptureFile):
     path = folder / name
-    if Path(name).is_absolute() or ".." in Path(name).parts:
-        raise CaptureError(CAPTURE_FILE, field, f"image path {name!r} must be relative to the capture folder")
+    check_relative(name, field)
     if path.is_dir():
         raise CaptureError(name, None, f"is a folder, expected an image file (named by {CAPTURE_FILE} {field})")
     if not path.is_file():
@@ -170,7 +168,8 @@ def load_capture(path) -> Capture | SmartphoneCapture:
         focal_px=(cfg.camera.focal_px, cfg.camera.focal_px_y or cfg.camera.focal_px),
         image_size=cfg.camera.image_size,
         principal_point=cfg.camera.principal_point,
-        up=cfg.camera.up,
+        # a huge or tiny hint made unit, so that the camera's axes stay finite (3 values in, 3 out)
+        up=unit_direction(cfg.camera.up),  # pyright: ignore[reportArgumentType]
     )
     rig = Rig(lamp=cfg.rig.lamp, camera=cam, probe=cfg.regions.probe, standard=cfg.regions.standard)
     name = cfg.name or folder.resolve().name

@@ -19,6 +19,7 @@ caller turns the field into its own spelling (``--rho-d`` on the command line,
 from __future__ import annotations
 
 import math
+import unicodedata
 from collections.abc import Sequence
 
 import numpy as np
@@ -36,6 +37,7 @@ __all__ = [
     "check_position",
     "check_rho_d_map",
     "check_ward_params",
+    "one_line",
 ]
 
 # The farthest a lamp, camera or target may sit from the sample (100 m): beyond
@@ -48,13 +50,28 @@ MAX_FOV_DEG = 170.0
 MAX_CLIPPED_FRACTION = 0.5
 
 
+def one_line(text: str) -> str:
+    """``text`` with every line break and control character written as its escape (``\\n``, ``\\x00``).
+
+    A refusal is one line; a file or field name read from the input (a TOML key,
+    an image path) may hold any character, and is shown escaped rather than
+    breaking the line.
+    """
+    if text.isprintable():
+        return text
+    return "".join(
+        ch.encode("unicode_escape").decode("ascii") if unicodedata.category(ch) in ("Cc", "Zl", "Zp") else ch
+        for ch in text
+    )
+
+
 class RuleError(ValueError):
-    """An input outside its allowed range: ``field`` and a ``message`` saying what is allowed."""
+    """An input outside its allowed range: ``field`` and a ``message`` saying what is allowed, on one line."""
 
     def __init__(self, field: str, message: str):
-        self.field = field
-        self.message = message
-        super().__init__(f"{field}: {message}")
+        self.field = one_line(field)
+        self.message = one_line(message)
+        super().__init__(f"{self.field}: {self.message}")
 
 
 def _finite_values(field: str, value, channels: tuple[int, ...]) -> np.ndarray:
@@ -110,7 +127,7 @@ def check_ward_params(rho_d, rho_s, alpha_x, alpha_y) -> None:
 def check_position(field: str, xyz) -> None:
     """Refuse a position (mm) that is not finite or lies farther than :data:`MAX_DISTANCE_MM` from the sample."""
     a = _finite_values(field, xyz, (3,))
-    dist = float(np.linalg.norm(a))
+    dist = math.hypot(*a)  # no overflow (nor warning) for coordinates near the largest float
     if dist > MAX_DISTANCE_MM:
         raise RuleError(field, f"{a.tolist()} lies {dist:.3g} mm from the sample; at most {MAX_DISTANCE_MM:.0e} mm")
 

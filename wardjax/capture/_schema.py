@@ -65,7 +65,7 @@ from ._errors import CAPTURE_FILE, CaptureError, pydantic_error
 from ._rules import RuleError, check_focal_px, check_position
 from ._smartphone import SmartphoneCaptureFile, parse_smartphone_file
 
-__all__ = ["CaptureFile", "parse_capture_file"]
+__all__ = ["CaptureFile", "parse_capture_file", "unit_direction"]
 
 # How far (mm) the lamp may sit off the plane x = 0 of the method's symmetry.
 LAMP_X_TOLERANCE = 1.0
@@ -160,6 +160,13 @@ class CaptureFile(_Section):
     fit: FitSection = FitSection()
 
 
+def unit_direction(v) -> tuple[float, ...]:
+    """The unit vector along ``v`` (not zero), scaled first by its largest component so that nothing overflows."""
+    a = np.asarray(v, np.float64)
+    a = a / np.max(np.abs(a))
+    return tuple(float(x) for x in a / np.linalg.norm(a))
+
+
 def _check_physics(cfg: CaptureFile) -> None:
     """Checks across fields that pydantic's per-field validation cannot make."""
     f = CAPTURE_FILE
@@ -188,7 +195,9 @@ def _check_physics(cfg: CaptureFile) -> None:
         raise CaptureError(
             f, "camera.look_at", f"look_at {list(cfg.camera.look_at)} coincides with the camera position"
         )
-    if np.linalg.norm(np.cross(fwd / np.linalg.norm(fwd), np.array(cfg.camera.up))) < 1e-6:
+    if max(abs(v) for v in cfg.camera.up) == 0:
+        raise CaptureError(f, "camera.up", f"must be a non-zero direction, got {list(cfg.camera.up)}")
+    if np.linalg.norm(np.cross(fwd / np.linalg.norm(fwd), unit_direction(cfg.camera.up))) < 1e-6:
         raise CaptureError(f, "camera.up", f"up {list(cfg.camera.up)} is parallel to the optical axis")
     w, h = cfg.camera.image_size
     if cfg.camera.principal_point is not None:
@@ -207,7 +216,7 @@ def _check_physics(cfg: CaptureFile) -> None:
         if (sign > 0 and x0 < 0) or (sign < 0 and x1 > 0):
             side = "x ≥ 0 (the probe side)" if sign > 0 else "x ≤ 0 (the standard side)"
             raise CaptureError(f, f"regions.{key}", f"must lie at {side}, got {list(box)}")
-    if np.linalg.norm(cfg.material.tangent) < 1e-9:
+    if max(abs(v) for v in cfg.material.tangent) < 1e-9:
         raise CaptureError(f, "material.tangent", f"must be a non-zero direction, got {list(cfg.material.tangent)}")
 
 
@@ -220,10 +229,14 @@ def parse_capture_file(path: Path) -> CaptureFile | SmartphoneCaptureFile:
         raise CaptureError(f, None, f"missing: no {CAPTURE_FILE} in {path.parent}")
     try:
         raw = tomllib.loads(path.read_text(encoding="utf-8"))
+    except OSError as e:
+        raise CaptureError(f, None, f"cannot be read ({e.strerror or type(e).__name__})") from None
     except UnicodeDecodeError as e:
         raise CaptureError(f, None, f"not UTF-8 text ({e.reason} at byte {e.start})") from None
     except tomllib.TOMLDecodeError as e:
         raise CaptureError(f, None, f"not valid TOML: {e}") from None
+    except RecursionError:  # arrays or tables nested thousands deep: no capture looks like that
+        raise CaptureError(f, None, "not a capture description: values nested too deeply") from None
     method = raw.get("method")
     if method == "smartphone":
         # The smartphone method's sections are in ._smartphone.

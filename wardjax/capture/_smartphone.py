@@ -151,11 +151,33 @@ def parse_smartphone_file(raw: dict, file: str) -> SmartphoneCaptureFile:
             fn(value)
         except (KeyError, ValueError) as e:
             raise CaptureError(file, field, str(e).strip("'\"")) from None
+    # A threshold is one of the gratings the display showed: a whole number of pixels per bar in its range.
+    disp = load_display(cfg.setup.display)
+    t = cfg.thresholds
+    for field, values in (
+        ("thresholds.ppb", t.ppb or []),
+        ("thresholds.ppb_mean", [] if t.ppb_mean is None else [t.ppb_mean]),
+    ):
+        bad = [v for v in values if not disp.ppb_min <= v <= disp.ppb_max]
+        if bad:
+            raise CaptureError(
+                file,
+                field,
+                f"{bad[0]} lies outside the gratings display {disp.name!r} shows: "
+                f"{disp.ppb_min} to {disp.ppb_max} pixels per bar",
+            )
     return cfg
+
+
+def check_relative(name: str, field: str) -> None:
+    """Refuse a file named in ``capture.toml`` that lies outside the capture folder (absolute, ``..``, NUL)."""
+    if Path(name).is_absolute() or ".." in Path(name).parts or "\x00" in name:
+        raise CaptureError(CAPTURE_FILE, field, f"file {name!r} must be a path inside the capture folder")
 
 
 def load_smartphone_capture(folder: Path, cfg: SmartphoneCaptureFile) -> SmartphoneCapture:
     """Load a smartphone capture folder whose ``capture.toml`` validated to ``cfg``."""
+    check_relative(cfg.photo.file, "photo.file")
     path = folder / cfg.photo.file
     if path.is_dir():
         raise CaptureError(CAPTURE_FILE, "photo.file", f"{cfg.photo.file!r} is a folder, expected an image file")
@@ -172,16 +194,19 @@ def load_smartphone_capture(folder: Path, cfg: SmartphoneCaptureFile) -> Smartph
         raise CaptureError(
             cfg.photo.file, None, f"is not an RGB image (shape {photo.shape}); the method needs a colour photo"
         )
+    if photo.dtype not in (np.uint8, np.uint16):
+        raise CaptureError(
+            cfg.photo.file, None, f"holds {photo.dtype} values; the method reads 8- or 16-bit photos (uint8, uint16)"
+        )
     h, w = photo.shape[:2]
     y0, y1, x0, x1 = cfg.photo.region
     if y1 > h or x1 > w:
         raise CaptureError(
             CAPTURE_FILE, "photo.region", f"{list(cfg.photo.region)} reaches outside the {w}×{h} photo {cfg.photo.file}"
         )
-    if np.issubdtype(photo.dtype, np.integer):
-        try:
-            check_photo_region(cfg.photo.file, photo[y0:y1, x0:x1], float(np.iinfo(photo.dtype).max))
-        except RuleError as e:
-            raise CaptureError(e.field, "photo.region", e.message) from None
+    try:
+        check_photo_region(cfg.photo.file, photo[y0:y1, x0:x1], float(np.iinfo(photo.dtype).max))
+    except RuleError as e:
+        raise CaptureError(e.field, "photo.region", e.message) from None
     checksums = {CAPTURE_FILE: sha256(folder / CAPTURE_FILE), cfg.photo.file: sha256(path)}
     return SmartphoneCapture(folder, cfg.name or folder.resolve().name, cfg, photo, checksums)

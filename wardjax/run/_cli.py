@@ -16,10 +16,15 @@ from rich.markup import escape
 
 __all__ = ["main"]
 
-console = Console()
+# emoji=False: a path or a value such as ``a:b:`` is printed as typed, not with ``:b:`` turned into an emoji.
+console = Console(emoji=False)
 
 # Where the traceback of a failure the code did not foresee is kept (the user sees one line naming it).
 ERROR_LOG_NAME = "error.log"
+
+
+# Click ≥ 8.2 raises this (a UsageError whose message is the whole help) for a group called without a command.
+_NO_ARGS_IS_HELP = getattr(click.exceptions, "NoArgsIsHelpError", ())
 
 
 class _Group(click.Group):
@@ -36,6 +41,9 @@ class _Group(click.Group):
             return super().main(args, prog_name, complete_var, standalone_mode=False, **extra)
         try:
             rv = super().main(args, prog_name, complete_var, standalone_mode=False, **extra)
+        except _NO_ARGS_IS_HELP as e:  # `wardjax`, `wardjax texture`: asked for nothing, shown the help (not an error)
+            click.echo(e.ctx.get_help() if e.ctx is not None else e.format_message())
+            sys.exit(0)
         except click.ClickException as e:
             hint = ""
             if isinstance(e, click.UsageError) and e.ctx is not None:
@@ -109,8 +117,23 @@ def _fail(message: str, code: int = 2) -> None:
     message is escaped so that text like ``[y0, y1, x0, x1]`` is not read as
     rich markup.
     """
-    Console(stderr=True, soft_wrap=True).print(f"[bold red]error:[/] {escape(message)}", highlight=False)
+    Console(stderr=True, soft_wrap=True, emoji=False).print(
+        f"[bold red]error:[/] {escape(_one_line(message))}", highlight=False
+    )
     sys.exit(code)
+
+
+def _one_line(text: str) -> str:
+    """``text`` with line breaks and control characters escaped (an argument typed as ``$'\\x85'`` stays on the line).
+
+    The rule of :func:`wardjax.capture.one_line`, here so that a refusal does not import the library (and JAX).
+    """
+    import unicodedata
+
+    return "".join(
+        ch.encode("unicode_escape").decode("ascii") if unicodedata.category(ch) in ("Cc", "Zl", "Zp") else ch
+        for ch in text
+    )
 
 
 def _check_out_dir(path: Path) -> None:
@@ -153,7 +176,7 @@ def _pm(value: float | None, err: float | None) -> str:
     show_default=True,
     help="Folder for the simulated captures and the results.",
 )
-@click.option("--seed", type=int, default=0, show_default=True)
+@click.option("--seed", type=click.IntRange(min=0), default=0, show_default=True)
 def demo(out_dir: Path, seed: int) -> None:
     """Simulate the desk and marble captures of the paper's Table 1, fit them, compare with the truth."""
     from ._demo import run_capture_demo
@@ -267,7 +290,7 @@ def fit_cmd(
 
     from ._batch import scanline_note
 
-    err = Console(stderr=True)
+    err = Console(stderr=True, emoji=False)
     missing = [str(p) for p in paths if not p.exists()]
     if missing:
         _fail(f"{missing[0]}: no such capture folder")
@@ -337,7 +360,7 @@ def fit_cmd(
     show_default=True,
     help="Image width and height in pixels.",
 )
-@click.option("--seed", type=int, default=0, show_default=True)
+@click.option("--seed", type=click.IntRange(min=0), default=0, show_default=True)
 @click.option(
     "--renderer",
     type=click.Choice(["wardjax", "radiance"]),
@@ -495,7 +518,7 @@ def texture_analyze(
 @texture.command("synthesize")
 @click.argument("model_path", metavar="TEXTURE", type=click.Path(path_type=Path))
 @click.option("--size", required=True, metavar="WIDTHxHEIGHT", help="Output size in pixels, e.g. 2048x1024.")
-@click.option("--seed", type=int, default=0, show_default=True)
+@click.option("--seed", type=click.IntRange(min=0), default=0, show_default=True)
 @click.option("--iterations", type=click.IntRange(1, 100), default=5, show_default=True)
 @click.option(
     "--match",
@@ -538,7 +561,7 @@ def texture_synthesize(model_path: Path, size: str, seed: int, iterations: int, 
             BarColumn(),
             MofNCompleteColumn(),
             TimeElapsedColumn(),
-            console=Console(stderr=True),
+            console=Console(stderr=True, emoji=False),
             transient=True,
         ) as bar:
             task = bar.add_task("", total=iterations)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import io
 import json
 from pathlib import Path
 
@@ -9,6 +10,7 @@ import equinox as eqx
 import numpy as np
 
 from .._files import atomic_path, write_json_atomic
+from ..capture import one_line
 from ._pyramid import (
     ORIENTATIONS,
 )
@@ -17,6 +19,10 @@ from ._steerable import band_names
 TEXTURE_FORMAT = "wardjax.texture"
 TEXTURE_FORMAT_VERSION = 1
 """Version of the saved texture description; bumped when the file layout changes."""
+# The largest pyramid and quantile table a description may hold (analysis makes at most 4 levels, 4097 quantiles).
+MAX_HEIGHT = 16
+MAX_QUANTILES = 4097
+REGION_SOURCES = ("argument", "whole image", "largest valid rectangle")
 
 # ================================================================== texture model
 
@@ -119,43 +125,62 @@ class TextureModel(eqx.Module):
 
     @classmethod
     def from_dict(cls, d: dict, *, source: str = "texture description") -> TextureModel:
-        """Validate and build a model from :meth:`to_dict`'s form; errors name ``source`` and the field."""
+        """Validate and build a model from :meth:`to_dict`'s form; errors name ``source`` and the field.
+
+        Every field is checked for its kind, shape and range, so that a model read from a file is one
+        :func:`analyze_texture` could have made: ρs in [0, 1), an orthonormal PCA basis, the region inside
+        the source image. Anything else is a ``ValueError`` naming ``source`` and the field, on one line.
+        """
 
         def field(name):
             if name not in d:
                 raise ValueError(f"{source}: missing field {name!r}")
             return d[name]
 
-        if field("format") != TEXTURE_FORMAT:
-            raise ValueError(f"{source}: field 'format' is {d['format']!r}, expected {TEXTURE_FORMAT!r}")
-        version = field("version")
-        if version != TEXTURE_FORMAT_VERSION:
-            raise ValueError(
-                f"{source}: field 'version' is {version!r}; this wardjax reads version {TEXTURE_FORMAT_VERSION}"
-            )
+        def refuse(name, what):
+            shown = repr(d[name])
+            shown = shown if len(shown) <= 60 else shown[:57] + "..."
+            raise ValueError(one_line(f"{source}: field {name!r} is {shown}, expected {what}"))
 
-        def integer(name, lo):
+        fmt = field("format")
+        if not isinstance(fmt, str) or fmt != TEXTURE_FORMAT:
+            refuse("format", repr(TEXTURE_FORMAT))
+        version = field("version")
+        if isinstance(version, bool) or not isinstance(version, (int, np.integer)) or version != TEXTURE_FORMAT_VERSION:
+            refuse("version", f"{TEXTURE_FORMAT_VERSION} (the version this wardjax reads)")
+
+        def integer(name, lo, hi):
             v = field(name)
-            if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < lo:
-                raise ValueError(f"{source}: field {name!r} is {v!r}, expected an integer >= {lo}")
+            if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or not lo <= v <= hi:
+                refuse(name, f"an integer in [{lo}, {hi}]")
             return int(v)
 
-        height, channels, q = integer("height", 0), integer("channels", 1), integer("n_quantiles", 2)
-        if integer("orientations", 1) != ORIENTATIONS:
-            raise ValueError(f"{source}: field 'orientations' is {d['orientations']!r}, expected {ORIENTATIONS}")
+        height, channels = integer("height", 0, MAX_HEIGHT), integer("channels", 1, 4)
+        q = integer("n_quantiles", 2, MAX_QUANTILES)
+        if integer("orientations", 1, 64) != ORIENTATIONS:
+            refuse("orientations", str(ORIENTATIONS))
         n_bands = 2 + ORIENTATIONS * height
 
         def array(name, shape):
             value = field(name)
             try:
-                a = np.asarray(value, dtype=np.float64)
-            except (TypeError, ValueError):
-                raise ValueError(f"{source}: field {name!r} is not an array of numbers") from None
+                a = np.asarray(value)
+            except (TypeError, ValueError, OverflowError):
+                a = None
+            if a is None or a.dtype.kind not in "iuf":  # booleans, strings, mixed or ragged lists
+                raise ValueError(f"{source}: field {name!r} is not an array of numbers")
             if a.shape != shape:
                 raise ValueError(f"{source}: field {name!r} has shape {a.shape}, expected {shape}")
+            a = a.astype(np.float64)
             if not np.isfinite(a).all():
                 raise ValueError(f"{source}: field {name!r} holds NaN or inf")
             return a
+
+        def pixels(name, n):
+            a = array(name, (n,))
+            if np.any(a != np.round(a)) or np.any(a < 0) or np.any(a > 2**31):
+                refuse(name, f"{n} whole numbers of pixels")
+            return tuple(int(v) for v in a)
 
         probs = array("probabilities", (q,))
         if probs[0] != 0 or probs[-1] != 1 or np.any(np.diff(probs) <= 0):
@@ -164,22 +189,33 @@ class TextureModel(eqx.Module):
         bands = array("band_quantiles", (channels, n_bands, q))
         if np.any(np.diff(pix, axis=-1) < 0) or np.any(np.diff(bands, axis=-1) < 0):
             raise ValueError(f"{source}: quantile tables must be nondecreasing")
-        names = [str(n) for n in np.asarray(field("band_names")).tolist()]
-        if tuple(names) != band_names(height):
+        names = field("band_names")
+        if not isinstance(names, (list, tuple, np.ndarray)) or tuple(str(n) for n in names) != band_names(height):
             raise ValueError(f"{source}: field 'band_names' does not match height {height}")
-        src_h, src_w = (int(v) for v in array("source_shape", (2,)))
-        y0, y1, x0, x1 = (int(v) for v in array("region", (4,)))
+        src_h, src_w = pixels("source_shape", 2)
+        y0, y1, x0, x1 = pixels("region", 4)
+        if not (0 <= y0 < y1 <= src_h and 0 <= x0 < x1 <= src_w):
+            refuse("region", f"a non-empty rectangle inside the {src_h}x{src_w} source")
+        rho_s = array("rho_s", (channels,))
+        if np.any(rho_s < 0) or np.any(rho_s >= 1):
+            refuse("rho_s", "values in [0, 1)")
+        basis = array("pca_basis", (channels, channels))
+        if not np.allclose(basis.T @ basis, np.eye(channels), atol=1e-6):
+            raise ValueError(f"{source}: field 'pca_basis' is not orthonormal (the PCA's axes)")
+        region_source = field("region_source")
+        if not isinstance(region_source, str) or region_source not in REGION_SOURCES:
+            refuse("region_source", " or ".join(repr(r) for r in REGION_SOURCES))
         return cls(
             pca_mean=array("pca_mean", (channels,)),
-            pca_basis=array("pca_basis", (channels, channels)),
+            pca_basis=basis,
             probabilities=probs,
             pixel_quantiles=pix,
             band_quantiles=bands,
             height=height,
-            rho_s=array("rho_s", (channels,)),
+            rho_s=rho_s,
             source_shape=(src_h, src_w),
             region=(y0, y1, x0, x1),
-            region_source=str(np.asarray(field("region_source")).item()),
+            region_source=str(region_source),
             version=int(version),
         )
 
@@ -208,19 +244,29 @@ class TextureModel(eqx.Module):
         if not path.is_file():
             raise ValueError(f"{path}: no such texture file")
         suffix = path.suffix.lower()
+        if suffix not in (".json", ".npz"):
+            raise ValueError(f"{path}: unknown texture file type {path.suffix!r}, expected .json or .npz")
+        try:
+            data = path.read_bytes()
+        except OSError as e:
+            raise ValueError(f"{path}: cannot read ({e.strerror})") from None
         if suffix == ".json":
             try:
-                d = json.loads(path.read_text())
-            except (UnicodeDecodeError, json.JSONDecodeError) as e:
-                raise ValueError(f"{path}: not valid JSON ({e})") from None
+                d = json.loads(data.decode("utf-8"))
+            except UnicodeDecodeError as e:
+                raise ValueError(f"{path}: not valid JSON (not UTF-8 text at byte {e.start})") from None
+            except (ValueError, RecursionError) as e:  # JSONDecodeError, a number too long, nesting too deep
+                raise ValueError(one_line(f"{path}: not valid JSON ({str(e)[:120]})")) from None
             if not isinstance(d, dict):
                 raise ValueError(f"{path}: expected a JSON object at top level")
-        elif suffix == ".npz":
-            try:
-                with np.load(path, allow_pickle=False) as z:
-                    d = {k: (z[k].item() if z[k].ndim == 0 else z[k]) for k in z.files}
-            except (OSError, ValueError) as e:
-                raise ValueError(f"{path}: not a readable .npz file ({e})") from None
         else:
-            raise ValueError(f"{path}: unknown texture file type {path.suffix!r}, expected .json or .npz")
-        return cls.from_dict(d, source=str(path))
+            try:
+                with np.load(io.BytesIO(data), allow_pickle=False) as z:
+                    d = {k: (z[k].item() if z[k].ndim == 0 else z[k]) for k in z.files}
+            except Exception as e:  # a corrupt zip raises BadZipFile, zlib.error, EOFError, …
+                reason = (str(e).strip().splitlines() or [type(e).__name__])[0][:120]
+                raise ValueError(one_line(f"{path}: not a readable .npz file ({reason})")) from None
+        try:
+            return cls.from_dict(d, source=str(path))
+        except RecursionError:
+            raise ValueError(f"{path}: fields nested too deeply to be a texture description") from None

@@ -254,8 +254,8 @@ def _check_args(model, shape, iterations, seed, match, sort) -> tuple[int, int]:
         )
     if isinstance(iterations, bool) or not isinstance(iterations, (int, np.integer)) or iterations < 1:
         raise ValueError(f"iterations={iterations!r}, expected an integer >= 1")
-    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)):
-        raise ValueError(f"seed={seed!r}, expected an integer")
+    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
+        raise ValueError(f"seed={seed!r}, expected an integer >= 0")
     if match not in MATCHES:
         raise ValueError(f"match={match!r}, expected 'binned' or 'exact'")
     if sort not in ("auto", "numpy", "xla"):
