@@ -292,7 +292,9 @@ def run_batch(
     out.mkdir(parents=True, exist_ok=True)
     captures = find_captures(paths)
     names = _names(captures)
-    created = datetime.datetime.now(datetime.UTC).replace(microsecond=0).isoformat().replace("+00:00", "Z")
+    # Microseconds: ``created`` also tells this batch's commits from an earlier batch's (a retried task
+    # skips what this batch already wrote, a rerun skips what an earlier one did), even a second apart.
+    created = datetime.datetime.now(datetime.UTC).isoformat(timespec="microseconds").replace("+00:00", "Z")
     jobs = [(src, name, out, created, force) for src, name in zip(captures, names)]
     done: dict[int, BatchItem] = {}
     log: list[str] = []
