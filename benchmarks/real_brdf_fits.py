@@ -26,6 +26,12 @@ RGL (``shared/data/rgl/*.bsdf``, not shipped: this script only)
     0.01 sr⁻¹ (``σ = 0.05 · max(f, 0.01)``), so the reduced χ² reads as (relative
     residual / 5 %)². A few interpolated values at grazing pairs are ≤ 0 (kept: their
     error is the floor's).
+
+``discover_adds`` (per material, the same on all its rows)
+    The effects :func:`wardjax.effects.discover` adds, in order and ``;``-joined (``none``
+    when it adds nothing), starting from its isotropic Ward 1992 baseline
+    (:class:`~wardjax.effects.ScanlineModel`) on the same samples and noise: CUReT through
+    :func:`wardjax.effects._real.curet_data` (σ = rel · f), RGL with the 5 % error above.
 """
 
 from __future__ import annotations
@@ -39,7 +45,8 @@ import numpy as np
 import wardjax as wj
 from wardjax._data import calibration_path
 from wardjax._files import write_bytes_atomic
-from wardjax.effects._real import curet_noise, load_curet
+from wardjax.effects import ScanlineModel, discover, scanline_data
+from wardjax.effects._real import curet_data, curet_noise, load_curet
 from wardjax.ward import NORMALIZATIONS
 
 RGL_DIR = Path(__file__).resolve().parents[2] / "shared" / "data" / "rgl"
@@ -68,6 +75,7 @@ COLUMNS = (
     "reduced_chi2",
     "rel_rms",
     "median_abs_rel_resid",
+    "discover_adds",
 )
 
 
@@ -125,8 +133,23 @@ def _rows(source, names, f, wi, wo, weights, *, grey: bool, floor: float = 1e-4)
     return out
 
 
-def curet_rows(indices=None) -> list[dict]:
-    """Rows for the CUReT samples at ``indices`` (0-based; default all 61)."""
+def _adds(data) -> str:
+    """What :func:`discover` adds to isotropic Ward on ``data``: names ``;``-joined, or ``none``."""
+    rep = discover(ScanlineModel(), data, keep_plot_data=False)
+    return ";".join(rep.found) or "none"
+
+
+def _with_adds(rows: list[dict], adds: dict[str, str] | None) -> list[dict]:
+    for r in rows:
+        r["discover_adds"] = "" if adds is None else adds[r["material"]]
+    return rows
+
+
+def curet_rows(indices=None, *, with_discover: bool = True) -> list[dict]:
+    """Rows for the CUReT samples at ``indices`` (0-based; default all 61).
+
+    ``with_discover=False`` leaves ``discover_adds`` empty (faster).
+    """
     ids, brdf, wi, wo = load_curet()
     idx = np.arange(len(ids)) if indices is None else np.asarray(indices)
     f = np.repeat(brdf[idx, :, None], 3, axis=-1)
@@ -134,7 +157,9 @@ def curet_rows(indices=None) -> list[dict]:
     weights = 1.0 / (rel[:, None, None] * np.maximum(f, 1e-4)) ** 2
     shape = (len(idx), *wi.shape)
     names = [f"curet_{int(ids[i]):02d}" for i in idx]
-    return _rows("curet", names, f, np.broadcast_to(wi, shape), np.broadcast_to(wo, shape), weights, grey=True)
+    rows = _rows("curet", names, f, np.broadcast_to(wi, shape), np.broadcast_to(wo, shape), weights, grey=True)
+    adds = {n: _adds(curet_data(int(i))[0]) for n, i in zip(names, idx, strict=True)} if with_discover else None
+    return _with_adds(rows, adds)
 
 
 def rgl_directions() -> tuple[np.ndarray, np.ndarray]:
@@ -179,7 +204,15 @@ def rgl_rows(folder: Path = RGL_DIR) -> list[dict]:
     f = np.stack([rgl_eval(folder / f"{m}.bsdf", wi, wo) for m in RGL_MATERIALS])
     weights = 1.0 / (RGL_REL_SIGMA * np.maximum(f, RGL_FLOOR)) ** 2
     shape = (len(RGL_MATERIALS), *wi.shape)
-    return _rows(
+    adds = {
+        m: _adds(
+            scanline_data(
+                f[k][None], wi[None], wo[None], (RGL_REL_SIGMA * np.maximum(f[k], RGL_FLOOR))[None], kind="brdf"
+            )
+        )
+        for k, m in enumerate(RGL_MATERIALS)
+    }
+    rows = _rows(
         "rgl",
         list(RGL_MATERIALS),
         f,
@@ -189,6 +222,7 @@ def rgl_rows(folder: Path = RGL_DIR) -> list[dict]:
         grey=False,
         floor=RGL_FLOOR,
     )
+    return _with_adds(rows, adds)
 
 
 def to_csv(rows: list[dict]) -> bytes:
@@ -223,6 +257,9 @@ def main() -> None:
                     f" median rel RMS {np.median([r['rel_rms'] for r in s]):.3f}  "
                     + ", ".join(f"{a} {b}" for a, b in zip(names, counts, strict=True))
                 )
+    per_material = {r["material"]: r["discover_adds"] for r in rows}
+    names, counts = np.unique(list(per_material.values()), return_counts=True)
+    print("discover adds: " + ", ".join(f"{a} {b}" for a, b in zip(names, counts, strict=True)))
     print(f"wrote {path} ({len(rows)} rows)")
 
 

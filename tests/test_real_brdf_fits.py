@@ -8,6 +8,7 @@ import pytest
 from benchmarks import real_brdf_fits as rbf
 from wardjax._data import calibration_path
 from wardjax._status import Status
+from wardjax.effects import LIBRARY
 from wardjax.ward import NORMALIZATIONS
 
 
@@ -29,6 +30,11 @@ def test_csv_covers_every_material_model_and_normalisation():
     for r in rows:
         assert r["status"] in names
         assert float(r["reduced_chi2"]) > 0 and 0 <= float(r["rel_rms"]) < 10
+    # discover's additions: per material, named effects of the library (or none)
+    known = {e.name for e in LIBRARY}
+    adds = {r["material"]: r["discover_adds"] for r in rows}
+    assert all(a == "none" or set(a.split(";")) <= known for a in adds.values()), adds
+    assert all(r["discover_adds"] == adds[r["material"]] for r in rows)
     # Ward misses CUReT at its measured noise: the typical reduced χ² is well above 1
     chi = np.array([float(r["reduced_chi2"]) for r in rows if r["source"] == "curet"])
     assert np.median(chi) > 5
@@ -38,12 +44,14 @@ def test_csv_covers_every_material_model_and_normalisation():
 def test_rerun_of_three_curet_samples_matches_the_csv(index):
     rows, _ = _csv()
     stored = {(r["model"], r["normalization"]): r for r in rows if r["material"] == f"curet_{index + 1:02d}"}
-    again = rbf.curet_rows([index])
+    again = rbf.curet_rows([index], with_discover=index == 30)
     assert len(again) == len(stored) == len(rbf.MODELS) * len(NORMALIZATIONS)
     for r in again:
         s = stored[(r["model"], r["normalization"])]
         assert s["status"] == r["status"]
-        for c in rbf.COLUMNS[5:]:
+        if index == 30:  # discover rerun on one sample: same effects, same order
+            assert s["discover_adds"] == r["discover_adds"]
+        for c in rbf.COLUMNS[5:-1]:
             assert float(s[c]) == pytest.approx(float(r[c]), rel=1e-4, abs=1e-9), (c, r["model"], r["normalization"])
         assert int(s["n_samples"]) == 205
         n_alpha = 1 if r["model"] == "isotropic" else 2

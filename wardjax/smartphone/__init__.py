@@ -5,6 +5,8 @@ from ._alpha_model import lightness_from_rho_d as lightness_from_rho_d
 from ._alpha_model import load_table1 as load_table1
 from ._alpha_model import physical_lines as physical_lines
 from ._alpha_model import PhysicalLines as PhysicalLines
+from ._alpha_physical import alpha_posterior_physical as alpha_posterior_physical
+from ._alpha_physical import physical_threshold_table as physical_threshold_table
 from ._alpha_posterior import alpha_posterior as alpha_posterior
 from ._alpha_posterior import alpha_posterior_batch as alpha_posterior_batch
 from ._alpha_posterior import AlphaPosterior as AlphaPosterior
@@ -47,6 +49,7 @@ from ._lobe_sd import lobe_sd_from_gonio as lobe_sd_from_gonio
 from ._lobe_sd import lobe_sd_percent_error as lobe_sd_percent_error
 from ._method import fit_smartphone as fit_smartphone
 from ._threshold_model import CSF_METHODS as CSF_METHODS
+from ._threshold_model import csf_cv_scatter as csf_cv_scatter
 from ._threshold_model import csf_sensitivity as csf_sensitivity
 from ._threshold_model import CSFFit as CSFFit
 from ._threshold_model import CSF_CALIBRATIONS as CSF_CALIBRATIONS
@@ -68,6 +71,8 @@ __all__ = [
     "load_table1",
     "physical_lines",
     "PhysicalLines",
+    "alpha_posterior_physical",
+    "physical_threshold_table",
     "alpha_posterior",
     "alpha_posterior_batch",
     "AlphaPosterior",
@@ -110,6 +115,7 @@ __all__ = [
     "lobe_sd_percent_error",
     "fit_smartphone",
     "CSF_METHODS",
+    "csf_cv_scatter",
     "csf_sensitivity",
     "CSFFit",
     "CSF_CALIBRATIONS",

@@ -58,6 +58,7 @@ from ._gratings import cpd_to_ppb, ppb_to_cpd
 __all__ = [
     "CSF_METHODS",
     "CSFFit",
+    "csf_cv_scatter",
     "csf_sensitivity",
     "CSF_CALIBRATIONS",
     "fit_csf_gratings",
@@ -163,6 +164,27 @@ def fit_csf_modelfest(method: str = "Barten 1999") -> CSFFit:
 
 
 @cache
+def csf_cv_scatter(method: str = "Barten 1999", calibration: str = "gratings") -> float:
+    """Out-of-sample RMS error of log10 S: leave-one-out over the calibration's castleCSF data.
+
+    Each threshold is predicted by the CSF refitted without it; the RMS of those errors is
+    the model's own scatter on data it was not fitted to (cached).
+    """
+    if calibration not in CSF_CALIBRATIONS:
+        raise ValueError(f"CSF calibration must be one of {CSF_CALIBRATIONS}; got {calibration!r}")
+    data = load_csf_gratings() if calibration == "gratings" else load_modelfest()
+    size = data["size"] if calibration == "gratings" else data["sigma"]
+    errs = []
+    for i in range(size.size):
+        keep = np.arange(size.size) != i
+        fit = _fit_csf(method, {k: v[keep] for k, v in data.items()}, size[keep])
+        x0 = fit.constants[2] * size[i] if method == "Barten 1999" else size[i]
+        s = csf_sensitivity(data["frequency"][i], data["luminance"][i], x0, fit)
+        errs.append(float(np.log10(s)) - float(np.log10(data["sensitivity"][i])))
+    return float(np.sqrt(np.mean(np.square(errs))))
+
+
+@cache
 def fit_csf_gratings(method: str = "Barten 1999") -> CSFFit:
     """Fit a CSF's constants to Rovamo et al.'s (1993) gratings of varying area (log10 S; cached).
 
@@ -223,6 +245,7 @@ def threshold_ppb(
     ambient_cd_m2: float = 0.0,
     display: str | Display = "iphone5s",
     viewing: str | Viewing = "paper",
+    sensitivity_scale: float = 1.0,
 ) -> NDArray:
     """Predicted threshold PPB of a surface from its lobe SD (degrees) and grey ρd (broadcast).
 
@@ -231,7 +254,8 @@ def threshold_ppb(
     ``[ppb_min, ppb_max]``: a grating visible at 1 PPB gives ``ppb_min``, one invisible at
     ``ppb_max`` gives ``ppb_max``. A method name in ``csf`` takes its constants from
     ``calibration``: ``"gratings"`` (default, :func:`fit_csf_gratings`) or ``"modelfest"``
-    (:func:`fit_csf_modelfest`).
+    (:func:`fit_csf_modelfest`). ``sensitivity_scale`` multiplies the CSF (a model error
+    in log S, used to propagate the CSF's scatter to the threshold).
     """
     disp, view = load_display(display), load_viewing(viewing)
     fit = _resolve_csf(csf, calibration)
@@ -245,7 +269,7 @@ def threshold_ppb(
 
     def visibility(f):
         amp = 4.0 / np.pi * rho_s * 0.5 * (lmax - lmin) * np.exp(-2.0 * np.pi**2 * sigma_v**2 * f**2)
-        return amp / lum * csf_sensitivity(f, lum, size, fit) - 1.0
+        return sensitivity_scale * amp / lum * csf_sensitivity(f, lum, size, fit) - 1.0
 
     f_lo = np.full(sd.shape, float(ppb_to_cpd(disp.ppb_max, disp, view)))
     f_hi = np.full(sd.shape, float(ppb_to_cpd(disp.ppb_min, disp, view)))
