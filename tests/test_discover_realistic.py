@@ -65,3 +65,21 @@ def test_no_effect_added_once_the_gap_is_within_noise(tmp_path):
     st = rep.final
     assert st.chi2 - st.dof <= 2 * math.sqrt(2 * st.dof)
     assert rep.to_dict()["verdict"] == rep.verdict()
+
+
+def test_long_range_texture_read_from_what_is_left_about_each_scanline_mean():
+    """A texture correlated over the whole scanline (ρ = 0.995 per sample, like the simulated wood) whose
+    per-scanline mean the ρd fit has taken out: the short lags see only ``T (1 − ρ)``, so the estimate must also
+    reproduce the variance left about each scanline's mean (the lag-0 row), not grow ``T`` without bound."""
+    from wardjax.effects._texture import _g0
+
+    rng = np.random.default_rng(2)
+    s, n = 60, 98
+    level = np.full((s, n, 1), 0.2)
+    e = 0.04 * _ar1(rng, (s, n), 0.995)[..., None] + 0.002 * rng.standard_normal((s, n, 1))
+    e -= e.mean(1, keepdims=True)  # what one ρd per scanline leaves
+    fit = estimate_texture(e, level, np.ones(e.shape, bool))
+    assert fit.significant()[0]
+    implied = fit.T[0] * np.mean(_g0(e[..., 0], float(fit.rho[0]))) + np.mean(fit.sigma(level) ** 2)
+    measured = np.mean(e**2)
+    assert abs(implied / measured - 1) < 0.15
