@@ -65,3 +65,47 @@ def test_no_effect_added_once_the_gap_is_within_noise(tmp_path):
     st = rep.final
     assert st.chi2 - st.dof <= 2 * math.sqrt(2 * st.dof)
     assert rep.to_dict()["verdict"] == rep.verdict()
+
+
+def test_long_range_texture_read_from_what_is_left_about_each_scanline_mean():
+    """A texture correlated over the whole scanline (ρ = 0.995 per sample, like the simulated wood) whose
+    per-scanline mean the ρd fit has taken out: the short lags see only ``T (1 − ρ)``, so the estimate must also
+    reproduce the variance left about each scanline's mean (the lag-0 row), not grow ``T`` without bound."""
+    from wardjax.effects._texture import _g0
+
+    rng = np.random.default_rng(2)
+    s, n = 60, 98
+    level = np.full((s, n, 1), 0.2)
+    e = 0.04 * _ar1(rng, (s, n), 0.995)[..., None] + 0.002 * rng.standard_normal((s, n, 1))
+    e -= e.mean(1, keepdims=True)  # what one ρd per scanline leaves
+    fit = estimate_texture(e, level, np.ones(e.shape, bool))
+    assert fit.significant()[0]
+    implied = fit.T[0] * np.mean(_g0(e[..., 0], float(fit.rho[0]))) + np.mean(fit.sigma(level) ** 2)
+    measured = np.mean(e**2)
+    assert abs(implied / measured - 1) < 0.15
+
+
+@pytest.mark.slow  # two discoveries on a textured capture: minutes on two cores
+@pytest.mark.parametrize("offset, named", [(0.0, []), (0.01, ["ambient"])])
+def test_textured_capture_offset_named_untouched_not(tmp_path, offset, named):
+    """A wood-textured capture ``simulate_capture`` wrote, its lit frame's linear values raised by ``offset``
+    (edited through the image codec, nothing of ``wardjax.effects``): with the texture carried, the untouched
+    capture names nothing and the offset is named ``ambient`` — the texture does not absorb it."""
+    import tomllib
+
+    from wardjax._files import decode_image, encode_image, read_image, write_image
+    from wardjax.effects._capture import capture_data
+
+    p = wj.WardParams(rho_d=(0.6, 0.5, 0.4), rho_s=0.04, alpha_x=0.12, alpha_y=0.12)
+    folder = tmp_path / "wood"
+    wj.simulate_capture(p, folder, seed=0, image_size=(160, 120), texture="wood")
+    if offset:
+        cfg = tomllib.loads((folder / "capture.toml").read_text())
+        enc, bits = cfg["images"]["encoding"], int(cfg["images"]["bit_depth"])
+        lit = folder / cfg["images"]["lit"]
+        v = decode_image(read_image(lit), enc, bits).astype(np.float64) + offset
+        write_image(lit, encode_image(np.clip(v, 0.0, 1.0), enc, bits))
+    cap = wj.load_capture(folder)
+    rep = discover(ScanlineModel(cap.config.fit.normalization), capture_data(cap), keep_plot_data=False, texture=True)
+    assert rep.settings["texture"] is not None
+    assert rep.found == named

@@ -39,6 +39,20 @@ Estimating ``T`` and ``ρ`` from one capture
     so that a lobe-shaped misfit of the baseline is not taken for texture — the noise model
     of :mod:`~wardjax.effects._capture` (Gasser et al. 1986) extended to
     correlated texture, which the lag-1 estimate there counted as noise.
+
+    Short lags alone identify only ``T (1 − ρ)`` when the texture is
+    correlated over most of a scanline (the simulated wood): the estimate then
+    ran to ``ρ = 0.995`` with ``T`` ~36× the variance the residuals actually
+    have, and the GP absorbed a smooth effect shared by all scanlines. So one
+    more row per value pins ``T``: the squared deviation from its scanline's
+    mean (the per-scanline ρd takes that mean out; off the highlight, as the
+    long lags), with::
+
+        E[(e_i − ē)²] = σ²(f_i) (1 − 1/n) + T (1 − 2/n Σ_j ρ^{|i−j|} + 1/n² Σ_jk ρ^{|j−k|})
+
+    (the variance the texture leaves about the mean of an ``n``-value
+    scanline), measured in ``benchmarks/texture_across_scanlines.py`` and
+    docs/missing-effects.md.
 """
 
 from __future__ import annotations
@@ -74,6 +88,30 @@ def _g(rho: float, k: int) -> float:
     return (6.0 - 8.0 * rho**k + 2.0 * rho ** (2 * k)) / 6.0
 
 
+def _lag0_rows(e: np.ndarray, level: np.ndarray):
+    """Squared deviations from each scanline's mean ``(e_i − ē_s)²``, their levels and ``1 − 1/n_s``."""
+    ok = np.isfinite(e)
+    n = ok.sum(1, keepdims=True)
+    mean = np.nansum(e, 1, keepdims=True) / np.maximum(n, 1)
+    use = ok & (n >= 8)
+    w = np.broadcast_to(1.0 - 1.0 / np.maximum(n, 1), e.shape)
+    return ((e - mean) ** 2)[use], level[use], w[use]
+
+
+def _g0(e: np.ndarray, rho: float) -> np.ndarray:
+    """Texture variance left about each scanline's mean, ``1 − 2/n Σ_j ρ^{|i−j|} + 1/n² Σ_jk ρ^{|j−k|}``."""
+    ok = np.isfinite(e)
+    n_pts = e.shape[1]
+    idx = np.arange(n_pts)
+    R = rho ** np.abs(idx[:, None] - idx[None, :]) if rho > 0 else np.eye(n_pts)
+    okf = ok.astype(float)
+    n = np.maximum(okf.sum(1, keepdims=True), 1.0)
+    row = okf @ R  # (S, N): Σ_j∈J ρ^{|i−j|}
+    tot = np.sum(row * okf, 1, keepdims=True)
+    g = 1.0 - 2.0 * row / n + tot / n**2
+    return g[ok & (n >= 8)]
+
+
 def estimate_texture(e: np.ndarray, level: np.ndarray, ok: np.ndarray, off: np.ndarray | None = None) -> TextureFit:
     """Noise and texture per channel from residuals ``e`` ``(S, N, C)`` at predicted ``level``, where ``ok``.
 
@@ -100,17 +138,20 @@ def estimate_texture(e: np.ndarray, level: np.ndarray, ok: np.ndarray, off: np.n
             rows_y.append(d2[m])
             rows_l.append(lv[m])
             rows_k.append(np.full(int(m.sum()), k))
-        y = np.concatenate(rows_y)
-        lv = np.concatenate(rows_l)
-        kk = np.concatenate(rows_k)
+        e0, l0, w0 = _lag0_rows(gk[..., c], level[..., c])
+        y = np.concatenate(rows_y + [e0])
+        lv = np.concatenate(rows_l + [l0])
+        kk = np.concatenate(rows_k + [np.zeros(e0.size, int)])
         sc = max(float(np.mean(np.abs(lv))), 1e-30)
         scale[c] = sc
         base = np.stack([np.ones_like(lv), lv / sc, (lv / sc) ** 2], -1)
+        base[kk == 0] *= w0[:, None]  # about the scanline mean, white noise keeps (1 − 1/n) of its variance
         coef0, res0 = nnls(base, y)
         best = (np.inf, None, 0.0)
         for r in _RHO_GRID:
             gr = np.array([_g(r, k) for k in _LAGS])
-            col = gr[np.searchsorted(_LAGS, kk)]
+            col = gr[np.searchsorted(_LAGS, np.maximum(kk, 1))]
+            col[kk == 0] = _g0(gk[..., c], r)
             coef, res = nnls(np.concatenate([base, col[:, None]], -1), y)
             if res < best[0]:
                 best = (res, coef, r)
