@@ -40,10 +40,15 @@ from __future__ import annotations
 import emcee
 import numpy as np
 from numpy.typing import NDArray
-from scipy.special import log_ndtr
 
 from ._alpha_model import AlphaModel, physical_lines
-from ._alpha_posterior import AlphaPosterior, NotConvergedError, _as_rho_d, _as_thresholds
+from ._alpha_posterior import (
+    AlphaPosterior,
+    NotConvergedError,
+    _as_rho_d,
+    _as_thresholds,
+    _observer_log_likelihood,
+)
 from ._color import luminance_from_rho_d
 from ._threshold_model import csf_cv_scatter, threshold_ppb
 
@@ -102,19 +107,7 @@ def _log_prob(theta, table, data, hyper):
     sigma = np.exp(log_s)
     lp = -0.5 * eta**2 - 0.5 * ((log_s - s_mu) / s_sd) ** 2
     with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-        if is_mean:
-            t = np.exp(log_t)
-            e_s2 = np.exp(sigma**2)
-            var = (t * t * e_s2 * (e_s2 - 1.0) + 1.0 / 12.0) / n_obs
-            lp = lp - 0.5 * (mean_ppb - t * np.sqrt(e_s2)) ** 2 / var - 0.5 * np.log(2 * np.pi * var)
-        else:
-            lo = np.where(k <= k_min, -np.inf, (np.log(np.maximum(k - 0.5, 1e-12))[None] - log_t[:, None]))
-            hi = np.where(k >= k_max, np.inf, (np.log(k + 0.5)[None] - log_t[:, None]))
-            lo, hi = lo / sigma[:, None], hi / sigma[:, None]
-            flip = lo > 0
-            aa, bb = np.where(flip, -hi, lo), np.where(flip, -lo, hi)
-            lb, la = log_ndtr(bb), log_ndtr(aa)
-            lp = lp + np.sum(lb + np.log1p(-np.exp(np.minimum(la - lb, 0.0))), axis=-1)
+        lp = lp + _observer_log_likelihood(log_t, sigma, k, is_mean, mean_ppb, n_obs, k_min, k_max)
     lp = np.where(ok, lp, -np.inf)
     return np.where(np.isnan(lp), -np.inf, lp)
 

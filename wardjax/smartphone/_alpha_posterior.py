@@ -127,14 +127,36 @@ _per_block = jax.vmap(_log_prob_one, in_axes=(0, None, None, None, None, None, N
 _batched = jax.jit(jax.vmap(_per_block, in_axes=(0, 0, 0, 0, 0, 0, 0, 0, None)))
 
 
+def _observer_log_likelihood(log_t, sigma, k, is_mean, mean_ppb, n_obs, k_min, k_max):
+    """Log-likelihood of the thresholds given each walker's median ``t = exp(log_t)`` and observer SD ``sigma``.
+
+    Individual thresholds ``k`` (pixels per bar): each observer's log threshold is
+    N(log t, σ²), read to the whole pixel (the interval ``[k − ½, k + ½]``) and censored at
+    the grating set's ends ``k_min``, ``k_max``. A published mean of ``n_obs`` observers
+    (``is_mean``): Gaussian with the log-normal's mean ``t e^{σ²/2}`` and variance
+    ``(t² e^{σ²}(e^{σ²} − 1) + 1/12) / n_obs``. Shared by the calibrated-lines and the
+    physical-model posteriors; ``log_t``, ``sigma`` are ``(W,)``.
+    """
+    from scipy.special import log_ndtr
+
+    if is_mean:
+        t, e_s2 = np.exp(log_t), np.exp(sigma**2)
+        var = (t * t * e_s2 * (e_s2 - 1.0) + 1.0 / 12.0) / n_obs
+        return -0.5 * (mean_ppb - t * np.sqrt(e_s2)) ** 2 / var - 0.5 * np.log(2 * np.pi * var)
+    lo = np.where(k <= k_min, -np.inf, (np.log(np.maximum(k - 0.5, 1e-12))[None] - log_t[:, None]) / sigma[:, None])
+    hi = np.where(k >= k_max, np.inf, (np.log(k + 0.5)[None] - log_t[:, None]) / sigma[:, None])
+    flip = lo > 0
+    aa, bb = np.where(flip, -hi, lo), np.where(flip, -lo, hi)
+    lb, la = log_ndtr(bb), log_ndtr(aa)
+    return np.sum(lb + np.log1p(-np.exp(np.minimum(la - lb, 0.0))), axis=-1)
+
+
 def log_prob_numpy(theta, k, mask, is_mean, mean_ppb, n_obs, mu, chol, hyper):
     """The same log posterior for one surface in plain NumPy/SciPy (``theta (W, 4)``).
 
     The reference implementation: tests check the JAX version against it, and the
     benchmark times emcee with it.
     """
-    from scipy.special import log_ndtr as np_log_ndtr
-
     theta = np.atleast_2d(theta)
     log_t, log_s, z1, z2 = theta.T
     s_mu, s_sd, log_a_lo, log_a_hi, k_min, k_max = hyper
@@ -147,20 +169,8 @@ def log_prob_numpy(theta, k, mask, is_mean, mean_ppb, n_obs, mu, chol, hyper):
         ok = (b > 0) & (alpha > 0) & (log_alpha >= log_a_lo) & (log_alpha <= log_a_hi)
         lp = -0.5 * (z1**2 + z2**2) - 0.5 * ((log_s - s_mu) / s_sd) ** 2
         lp = lp + np.log(np.where(ok, b * t, 1.0)) - log_alpha
-        if is_mean:
-            e_s2 = np.exp(sigma**2)
-            var = (t * t * e_s2 * (e_s2 - 1.0) + 1.0 / 12.0) / n_obs
-            lp = lp - 0.5 * (mean_ppb - t * np.sqrt(e_s2)) ** 2 / var - 0.5 * np.log(2 * np.pi * var)
-        else:
-            kk = np.asarray(k)[np.asarray(mask, bool)]
-            lo = np.where(
-                kk <= k_min, -np.inf, (np.log(np.maximum(kk - 0.5, 1e-12))[None] - log_t[:, None]) / sigma[:, None]
-            )
-            hi = np.where(kk >= k_max, np.inf, (np.log(kk + 0.5)[None] - log_t[:, None]) / sigma[:, None])
-            flip = lo > 0
-            aa, bb = np.where(flip, -hi, lo), np.where(flip, -lo, hi)
-            lb, la = np_log_ndtr(bb), np_log_ndtr(aa)
-            lp = lp + np.sum(lb + np.log1p(-np.exp(np.minimum(la - lb, 0.0))), axis=-1)
+        kk = None if is_mean else np.asarray(k)[np.asarray(mask, bool)]
+        lp = lp + _observer_log_likelihood(log_t, sigma, kk, is_mean, mean_ppb, n_obs, k_min, k_max)
     lp = np.where(ok, lp, -np.inf)
     return np.where(np.isnan(lp), -np.inf, lp)
 
