@@ -246,10 +246,11 @@ def fit_one(source: Path, name: str, out: Path, created: str, force: bool = Fals
         return BatchItem(source, name, "ok", params=doc), None
     except Exception as e:  # a bad capture must not sink the batch, nor leave half its outputs
         shutil.rmtree(staging, ignore_errors=True)
+        line = _one_line(e, out / ERROR_LOG)
         tb = None
-        if _one_line(e).startswith("unexpected failure"):
+        if line.startswith("unexpected failure"):
             tb = f"{name} ({source}):\n{''.join(traceback.format_exception(e))}"
-        return BatchItem(source, name, "error", error=_one_line(e, out / ERROR_LOG)), tb
+        return BatchItem(source, name, "error", error=line), tb
 
 
 def run_batch(
