@@ -6,7 +6,8 @@ before JAX starts, so the comparison runs in a subprocess. On those two
 devices it fits 300 simulated scanlines (an odd count: the last call is padded
 to whole rows per device) and synthesises a 3-channel texture (the channels
 are padded to 4, two per device), each once sharded over both devices and
-once on the first alone. The partitioned program rounds differently from the
+once on the first alone; 37 of the fits are also run with profile-likelihood
+errors for every row (the profiles are split over the devices too). The partitioned program rounds differently from the
 one-device program (XLA fuses it differently), and the fixed-iteration LM
 carries that into the last digits: the fits agree to 1e-7 relative, five orders
 of magnitude below their standard errors. The texture's first pyramid is
@@ -49,6 +50,16 @@ SCRIPT = textwrap.dedent(
         np.testing.assert_allclose(x, y, rtol=1e-7, err_msg=name)
     np.testing.assert_allclose(fits[0].stderr.alpha_x, fits[1].stderr.alpha_x, rtol=1e-6)
     np.testing.assert_array_equal(fits[0].status, fits[1].status)
+    # Profile-likelihood errors (every converged row profiled) are split over the devices the same way.
+    prof = [
+        wj.fit_scanlines(data.f_r[:37], data.wi[:37], data.wo[:37], weights=1 / data.sigma[:37] ** 2,
+                         chunk_size=64, devices=d, errors="profile")
+        for d in (both, both[:1])
+    ]
+    assert (prof[0].errors == "profile").sum() > 30, prof[0].errors
+    np.testing.assert_array_equal(prof[0].errors, prof[1].errors)
+    for name in ("rho_s", "alpha_x"):
+        np.testing.assert_allclose(getattr(prof[0].stderr, name), getattr(prof[1].stderr, name), rtol=1e-6)
     # The fits are right, not only equal: α recovered to a few per cent.
     assert np.median(np.abs(fits[0].params.alpha_x / a - 1)) < 0.02
 

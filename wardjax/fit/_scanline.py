@@ -285,7 +285,7 @@ def fit_scanlines(
     if solver == "fast" and iso and errors != "gauss_newton":
         if errors == "profile":
             sol.nonlinear[:] = 1
-        _profile_where_nonlinear(sol, data, normalization=normalization)
+        _profile_where_nonlinear(sol, data, normalization=normalization, devices=devices)
     else:
         sol.nonlinear[:] = 0
     return _assemble(sol, data, model, normalization, solver)
@@ -347,13 +347,16 @@ def _solve(data, *, iso, normalization, solver, dtype, chunk, devices=None, chec
         return jax.tree_util.tree_map(lambda *a: np.concatenate(a).astype(np.float64), *sol)
 
 
-def _profile_where_nonlinear(sol: _varpro.ScanlineSolution, data, *, normalization) -> None:
+def _profile_where_nonlinear(sol: _varpro.ScanlineSolution, data, *, normalization, devices=None) -> None:
     """Profile-likelihood errors of ρs and α, in float64, for the rows whose curvature check failed.
 
     Rescales those rows of ``sol.cov`` (in place) so that its diagonal holds the
     profile variances; the correlations stay the Gauss–Newton ones. ``sol.nonlinear``
-    keeps which rows changed. Only these rows pay for the 33-point profiles.
+    keeps which rows changed. Only these rows pay for the 33-point profiles,
+    split over ``devices`` along the scanline axis as :func:`_solve` splits the fits.
     """
+    devices = _check_devices(devices)
+    sharding = _placement(devices)
     rows = np.flatnonzero(sol.nonlinear.astype(bool) & (sol.status == Status.CONVERGED))
     if not rows.size:
         return
@@ -361,18 +364,19 @@ def _profile_where_nonlinear(sol: _varpro.ScanlineSolution, data, *, normalizati
     n_true = data[0].shape[1]
     n_pad = _shapes.bucket(n_true)
     sub = pad_samples(sub, n_pad)
-    chunk = _CHUNK[np.dtype(np.float64)]
+    chunk = _CHUNK[np.dtype(np.float64)] * len(devices)
     scale = np.asarray(sol.chi2, np.float64)[rows] / np.maximum(np.asarray(sol.dof)[rows], 1)
     fit = [np.asarray(a, np.float64)[rows] for a in (sol.alpha[:, 0], sol.rho_s, sol.chi2, sol.cov)]
     with jax.enable_x64(True):
         n = None if n_pad == n_true else jnp.asarray(n_true, jnp.int32)
         out = []
         for start, stop, size in buckets(rows.size, chunk):
-            args = [None if a is None else jax.device_put(pad_rows(a[start:stop], size)) for a in sub]
+            size = -(-size // len(devices)) * len(devices)  # whole rows on every device
+            args = [None if a is None else jax.device_put(pad_rows(a[start:stop], size), sharding) for a in sub]
             parts = _geometry_chunk(*args, normalization=normalization, dtype=np.dtype(np.float64))
             prepared = moments_chunk(*parts, n, iso=True)
-            pick = [pad_rows(a[start:stop], size) for a in fit]
-            sig = _profile.profile_chunk(prepared, *pick, pad_rows(scale[start:stop], size))
+            pick = [jax.device_put(pad_rows(a[start:stop], size), sharding) for a in (*fit, scale)]
+            sig = _profile.profile_chunk(prepared, *pick)
             out.append(np.stack([np.asarray(v)[: stop - start] for v in sig], -1))
         sig = np.concatenate(out)
     cov = sol.cov[rows]
