@@ -1,4 +1,4 @@
-"""Execute notebooks/missing_effects.ipynb (a hidden-effect case and the Table 1 contrast-gloss case)."""
+"""Execute notebooks/missing_effects.ipynb (a hidden effect, Table 1 contrast gloss, the Fig. 10 screen)."""
 
 import time
 from pathlib import Path
@@ -21,6 +21,8 @@ def test_missing_effects_notebook_runs():
     text = "".join(o.get("text", "") for o in outs)
     assert "found: ['anisotropy']" in text
     assert "found: ['contrast_gloss']" in text
+    assert "found: ['directional_emission']" in text  # the Fig. 10 directional screen
+    assert "Lambertian screen (null): found: []" in text
     html = "".join(o.get("data", {}).get("text/html", "") for o in outs)
     assert html.count("<img") >= 4  # both reports render with their gap and residual figures
     assert sum("image/png" in o.get("data", {}) for o in outs) >= 1  # the Table 1 lines

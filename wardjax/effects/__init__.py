@@ -20,6 +20,10 @@ from ._models import ThresholdData as ThresholdData
 from ._models import ThresholdModel as ThresholdModel
 from ._models import scanline_data as scanline_data
 from ._models import threshold_data as threshold_data
+from ._screen import SCREEN_EFFECTS as SCREEN_EFFECTS
+from ._screen import ScreenData as ScreenData
+from ._screen import ScreenModel as ScreenModel
+from ._screen import screen_data as screen_data
 from ._report import Candidate as Candidate
 from ._report import DiscoveryReport as DiscoveryReport
 from ._report import Step as Step
@@ -37,6 +41,10 @@ __all__ = [
     "ThresholdModel",
     "scanline_data",
     "threshold_data",
+    "SCREEN_EFFECTS",
+    "ScreenData",
+    "ScreenModel",
+    "screen_data",
     "Candidate",
     "DiscoveryReport",
     "Step",

@@ -223,7 +223,8 @@ def _check_inputs(model, data, alpha: float) -> None:
     for attr in ("kind", "base_params", "residuals", "predict", "covariates", "n_profiled"):
         if not hasattr(model, attr):
             raise TypeError(f"model must provide {attr!r} (a ScanlineModel or ThresholdModel), got {type(model)!r}")
-    if getattr(data, "kind", None) not in (("ratio", "brdf") if model.kind == "scanline" else ("threshold",)):
+    kinds = getattr(model, "data_kinds", ("ratio", "brdf") if model.kind == "scanline" else ("threshold",))
+    if getattr(data, "kind", None) not in kinds:
         raise TypeError(f"data of kind {getattr(data, 'kind', type(data))!r} do not suit a {model.kind} model")
     if not 0 < alpha < 1:
         raise ValueError(f"alpha must be in (0, 1), got {alpha}")
@@ -235,10 +236,11 @@ def _split_library(model, data, effects):
     Effects of another model kind are dropped silently; those the data cannot
     test are kept aside so that the report can say why they were not tried.
     """
-    lib = library(model.kind) if effects is None else tuple(effects)
+    lib = library(getattr(model, "library_kind", model.kind)) if effects is None else tuple(effects)
+    supports = getattr(model, "supports", lambda e: e.model == model.kind)  # a model may take another kind's
     testable, skipped = [], []
     for e in lib:
-        if e.model != model.kind:
+        if not supports(e):
             continue
         why = e.applicable(data)
         if why is None:

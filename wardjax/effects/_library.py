@@ -260,7 +260,12 @@ class DirectionalEmission(_ScanlineEffect):
     emission from the iPhone screen was quite directional"; Fig. 10). In the
     image-based rig the lamp lies in the symmetry plane, ``β(p) = β(p')``, and
     the factor cancels from ``v/v_std``: *not detectable* from reconstructed
-    BRDFs. On radiance data it would be ``f · cos^n β`` against ``β``.
+    BRDFs. On radiance data it is ``f · cos^n β`` against ``β`` for one
+    source per observation (:meth:`measure`), and ``cos^n θe,k`` on each of
+    an extended source's cells ``k`` (:meth:`source_factor`) — a phone
+    screen reflected in a sample (:class:`~wardjax.effects.ScreenModel`),
+    where the light reaching one pixel leaves the screen over a wide range
+    of angles, so no single ``β`` per pixel stands for it.
     """
 
     name = "directional_emission"
@@ -277,6 +282,10 @@ class DirectionalEmission(_ScanlineEffect):
     def unmeasure(self, v, y, ctx):
         k = jnp.cos(ctx["emission_angle"][..., None]) ** (-v["n"])
         return y * k, k
+
+    def source_factor(self, v, ctx):
+        """``cos^n θe`` per observation and source cell (``ctx["cos_emit"]``, > 0 where a cell lights a point)."""
+        return ctx["cos_emit"] ** v["n"]
 
 
 # ============================================================================ material side
