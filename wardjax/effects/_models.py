@@ -276,12 +276,33 @@ def _gated(on, hook, x):
     """
     if on is None or isinstance(on, bool):
         return hook(x)
+    if on is _IDENTITY:
+        return x
     return jax.lax.cond(
         on,
         lambda x: jax.tree_util.tree_map(lambda a, b: jnp.broadcast_to(a, jnp.shape(b)).astype(b.dtype), hook(x), x),
         lambda x: x,
         x,
     )
+
+
+_IDENTITY = object()  # a hook the effect does not override: the base class's identity, nothing to evaluate
+
+
+def _switch(active, e, hook: str):
+    """The flag :func:`_gated` takes for effect ``e``'s ``hook``: its entry in ``active``, or :data:`_IDENTITY`.
+
+    A hook the effect inherits from the scanline base class (``_ScanlineEffect``
+    in :mod:`wardjax.effects._library`, where every hook is the identity) is
+    skipped outright: a ``lax.cond`` around an identity still copies the
+    array and breaks XLA's fusion.
+    """
+    for cls in type(e).__mro__:
+        if hook in vars(cls):
+            if cls.__name__ == "_ScanlineEffect":
+                return _IDENTITY
+            break
+    return None if active is None else active.get(e.name)
 
 
 def _whiten(W, z):
@@ -350,7 +371,6 @@ class ScanlineModel:
 
     def _parts(self, vals, effects, data, ctx, active=None):
         """The Ward terms without ρd: ``(S, N, C)`` specular plus extra terms."""
-        on = (lambda e: None) if active is None else (lambda e: active.get(e.name))
         base = vals["model"]
         ax = ay = base["alpha"]
         phi = 0.0
@@ -358,14 +378,16 @@ class ScanlineModel:
             ax, ay, phi = e.lobe(vals[e.name], ax, ay, phi)
         spec = _lobe(ctx, ax, ay, phi)
         for e in effects:
-            spec = _gated(on(e), lambda s, e=e: s * e.spec_factor(vals[e.name], ctx), spec)
+            spec = _gated(_switch(active, e, "spec_factor"), lambda s, e=e: s * e.spec_factor(vals[e.name], ctx), spec)
         c = data.y.shape[-1]
         rs = base["rho_s"] * jnp.ones((c,))
         for e in effects:
             rs = rs * e.rho_s_factor(vals[e.name], c)
         term = rs[None, None, :] * spec[..., None]
         for e in effects:
-            term = _gated(on(e), lambda t, e=e: t + e.extra(vals[e.name], ctx, base, ax, ay, phi), term)
+            term = _gated(
+                _switch(active, e, "extra"), lambda t, e=e: t + e.extra(vals[e.name], ctx, base, ax, ay, phi), term
+            )
         return jnp.where(ctx["valid"][..., None], term, 0.0)
 
     def _unmeasure(self, vals, effects, data, ctx, active=None):
@@ -375,7 +397,6 @@ class ScanlineModel:
         with ``f`` under the propagated noise (delta method, exact to first order
         in ``σ/y``) keeps ρd linear, so it is profiled in closed form.
         """
-        on = (lambda e: None) if active is None else (lambda e: active.get(e.name))
 
         def step(e, yd):
             y, dd = e.unmeasure(vals[e.name], yd[0], ctx)
@@ -383,7 +404,7 @@ class ScanlineModel:
 
         yd = (data.y, jnp.ones_like(data.y))
         for e in reversed(effects):
-            yd = _gated(on(e), lambda yd, e=e: step(e, yd), yd)
+            yd = _gated(_switch(active, e, "unmeasure"), lambda yd, e=e: step(e, yd), yd)
         return yd[0], data.sigma * jnp.abs(yd[1])
 
     def _profile(self, vals, active, effects, data, ctx):
@@ -414,7 +435,7 @@ class ScanlineModel:
         # of the linearised problem (close to, never better than, the exact optimum), so a
         # measurement effect cannot lower χ² by stretching the propagated noise
         for e in effects:
-            f = _gated(active.get(e.name), lambda f, e=e: e.measure(vals[e.name], f, ctx), f)
+            f = _gated(_switch(active, e, "measure"), lambda f, e=e: e.measure(vals[e.name], f, ctx), f)
         z = jnp.where(data.mask, (data.y - f) / data.sigma, 0.0)
         if data.whiten is not None:  # decoupled (identity) rows where a value is flagged clipped or masked
             z = _whiten(data.whiten, z)
