@@ -75,13 +75,19 @@ def test_absorbed_gamma_is_named_not_a_partial_match():
 
 def test_solo_fits_equal_batched_fits(reports, monkeypatch):
     """Large data solve each fit alone instead of in vmapped batches: the same effects, gaps, parameters
-    and evidence as the batched solve that small data use."""
-    from wardjax.effects import _discover
+    and evidence as the batched solve that small data use. A solo fit is not vmapped, so each inactive
+    effect is skipped by its ``lax.cond`` (under vmap both branches run and the absent effect is evaluated
+    as the identity): this also checks that skipping changes no fit. And the whole run — baseline, every
+    candidate of every step, the continued fits — compiles at most one solve program."""
+    from wardjax.effects import _discover, _solve
 
     case, rep = reports["anisotropy"]  # batched: 3,072 residuals < _SOLO_MIN_OBS
     assert rep.n_obs < _discover._SOLO_MIN_OBS
     monkeypatch.setattr(_discover, "_SOLO_MIN_OBS", 0)
+    n_programs = _solve._solve_batch._cache_size()
     solo = discover(ScanlineModel(), case.data)
+    assert len(solo.steps) >= 1 and sum(len(s.candidates) for s in solo.steps) >= 8
+    assert _solve._solve_batch._cache_size() - n_programs <= 1
     tol = dict(rtol=1e-10, atol=0)
     assert solo.found == rep.found == ["anisotropy"]
     np.testing.assert_allclose(solo.gap, rep.gap, **tol)

@@ -37,6 +37,7 @@ from __future__ import annotations
 import dataclasses
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 import numpy as np
 from jax.scipy.special import log_ndtr
@@ -262,6 +263,48 @@ def _lobe(ctx, ax, ay, phi):
     return ctx["g"] * jnp.exp(-e) / (ax * ay)
 
 
+def _gated(on, hook, x):
+    """``hook(x)`` where the effect is switched on, ``x`` unchanged where it is off.
+
+    ``on`` is the effect's traced flag in a fit (``discover`` switches effects
+    by data, so one compiled program serves every candidate): a ``lax.cond``
+    then runs only the branch taken, so an inactive effect costs nothing in
+    the residuals or their Jacobian — unbatched; under ``vmap`` with a batched
+    flag JAX evaluates both branches, as before. At their absent values the
+    hooks are the identity (to rounding), so the result is the same either
+    way. ``on`` absent (``None``) or a Python bool: the hook is applied as is.
+    """
+    if on is None or isinstance(on, bool):
+        return hook(x)
+    if on is _IDENTITY:
+        return x
+    return jax.lax.cond(
+        on,
+        lambda x: jax.tree_util.tree_map(lambda a, b: jnp.broadcast_to(a, jnp.shape(b)).astype(b.dtype), hook(x), x),
+        lambda x: x,
+        x,
+    )
+
+
+_IDENTITY = object()  # a hook the effect does not override: the base class's identity, nothing to evaluate
+
+
+def _switch(active, e, hook: str):
+    """The flag :func:`_gated` takes for effect ``e``'s ``hook``: its entry in ``active``, or :data:`_IDENTITY`.
+
+    A hook the effect inherits from the scanline base class (``_ScanlineEffect``
+    in :mod:`wardjax.effects._library`, where every hook is the identity) is
+    skipped outright: a ``lax.cond`` around an identity still copies the
+    array and breaks XLA's fusion.
+    """
+    for cls in type(e).__mro__:
+        if hook in vars(cls):
+            if cls.__name__ == "_ScanlineEffect":
+                return _IDENTITY
+            break
+    return None if active is None else active.get(e.name)
+
+
 def _whiten(W, z):
     """``L⁻¹ z`` along each scanline and channel: ``W`` ``(S, C, N, N)``, ``z`` ``(S, N, C)``."""
     return jnp.einsum("scij,sjc->sic", W, z)
@@ -326,7 +369,7 @@ class ScanlineModel:
         ctx.update(data.cov)
         return ctx
 
-    def _parts(self, vals, effects, data, ctx):
+    def _parts(self, vals, effects, data, ctx, active=None):
         """The Ward terms without ρd: ``(S, N, C)`` specular plus extra terms."""
         base = vals["model"]
         ax = ay = base["alpha"]
@@ -335,33 +378,39 @@ class ScanlineModel:
             ax, ay, phi = e.lobe(vals[e.name], ax, ay, phi)
         spec = _lobe(ctx, ax, ay, phi)
         for e in effects:
-            spec = spec * e.spec_factor(vals[e.name], ctx)
+            spec = _gated(_switch(active, e, "spec_factor"), lambda s, e=e: s * e.spec_factor(vals[e.name], ctx), spec)
         c = data.y.shape[-1]
         rs = base["rho_s"] * jnp.ones((c,))
         for e in effects:
             rs = rs * e.rho_s_factor(vals[e.name], c)
         term = rs[None, None, :] * spec[..., None]
         for e in effects:
-            term = term + e.extra(vals[e.name], ctx, base, ax, ay, phi)
+            term = _gated(
+                _switch(active, e, "extra"), lambda t, e=e: t + e.extra(vals[e.name], ctx, base, ax, ay, phi), term
+            )
         return jnp.where(ctx["valid"][..., None], term, 0.0)
 
-    def _unmeasure(self, vals, effects, data, ctx):
+    def _unmeasure(self, vals, effects, data, ctx, active=None):
         """Observations mapped back through the measurement effects: ``y'`` and ``σ' = σ |dy'/dy|``.
 
         The measurement chain ``f_meas = M(f)`` is monotone; comparing ``M⁻¹(y)``
         with ``f`` under the propagated noise (delta method, exact to first order
         in ``σ/y``) keeps ρd linear, so it is profiled in closed form.
         """
-        y, d = data.y, jnp.ones_like(data.y)
+
+        def step(e, yd):
+            y, dd = e.unmeasure(vals[e.name], yd[0], ctx)
+            return y, yd[1] * dd
+
+        yd = (data.y, jnp.ones_like(data.y))
         for e in reversed(effects):
-            y, dd = e.unmeasure(vals[e.name], y, ctx)
-            d = d * dd
-        return y, data.sigma * jnp.abs(d)
+            yd = _gated(_switch(active, e, "unmeasure"), lambda yd, e=e: step(e, yd), yd)
+        return yd[0], data.sigma * jnp.abs(yd[1])
 
     def _profile(self, vals, active, effects, data, ctx):
         """Profiled ρd per scanline and channel, whitened residuals, prediction."""
-        term = self._parts(vals, effects, data, ctx)
-        yp, sp = self._unmeasure(vals, effects, data, ctx)
+        term = self._parts(vals, effects, data, ctx, active)
+        yp, sp = self._unmeasure(vals, effects, data, ctx, active)
         cens = jnp.zeros(data.y.shape, bool)
         censoring = any(getattr(e, "censors", False) for e in effects)
         if censoring:
@@ -386,7 +435,7 @@ class ScanlineModel:
         # of the linearised problem (close to, never better than, the exact optimum), so a
         # measurement effect cannot lower χ² by stretching the propagated noise
         for e in effects:
-            f = e.measure(vals[e.name], f, ctx)
+            f = _gated(_switch(active, e, "measure"), lambda f, e=e: e.measure(vals[e.name], f, ctx), f)
         z = jnp.where(data.mask, (data.y - f) / data.sigma, 0.0)
         if data.whiten is not None:  # decoupled (identity) rows where a value is flagged clipped or masked
             z = _whiten(data.whiten, z)

@@ -109,6 +109,10 @@ def _solve_batch(u0, a0, idx, kmask, active, prior_w, data, *, model, effects, l
         u = u0.at[idx].set(jnp.where(kmask, z, u0[idx]))
         return u, chi2, jtj, ok, sol.stats["num_steps"]
 
+    if u0.shape[0] == 1:
+        # one fit (solo mode): not vmapped, so the effects' flags stay unbatched and each inactive effect's
+        # ``lax.cond`` skips it (under vmap a batched flag evaluates both branches)
+        return jax.tree_util.tree_map(lambda a: a[None], one(u0[0], a0[0], idx[0], kmask[0], active[0]))
     return jax.vmap(one)(u0, a0, idx, kmask, active)
 
 
@@ -146,7 +150,12 @@ def _job_rows(jobs, layout, n_e, width):
 
 
 def _solve_rows(rows, layout, model, effects, data, max_steps):
-    """One ``_solve_batch`` call on stacked rows; host arrays back."""
+    """One ``_solve_batch`` call on stacked rows, dispatched: device arrays back, not yet waited for.
+
+    JAX dispatches asynchronously, so a caller that dispatches several calls
+    before reading any lets the runtime execute them side by side (on CPU,
+    on more than one core).
+    """
     U0, A0, IDX, KM, A = (np.stack(col) for col in zip(*rows))
     with jax.enable_x64(True):
         u, chi2, jtj, ok, _ = _solve_batch(
@@ -162,7 +171,7 @@ def _solve_rows(rows, layout, model, effects, data, max_steps):
             layout_key=layout.key,
             max_steps=max_steps,
         )
-        return tuple(np.asarray(x) for x in (u, chi2, jtj, ok))
+    return u, chi2, jtj, ok
 
 
 def _fit_batch(jobs, layout, model, effects, data, k_pad, b_pad, max_steps, chunk, solo=False):
@@ -190,11 +199,14 @@ def _fit_batch(jobs, layout, model, effects, data, k_pad, b_pad, max_steps, chun
         chunk = width = 1
     else:
         width = min(b_pad, chunk)
-    out = []
-    for c0 in range(0, len(rows), chunk):
+    calls = []
+    for c0 in range(0, len(rows), chunk):  # every call dispatched before any is read: they may run side by side
         part = rows[c0 : c0 + chunk]
         pad = part + [part[0]] * (width - len(part)) if len(part) < width else part
-        u, chi2, jtj, ok = _solve_rows(pad, layout, model, effects, data, max_steps)
+        calls.append((part, _solve_rows(pad, layout, model, effects, data, max_steps)))
+    out = []
+    for part, dev in calls:
+        u, chi2, jtj, ok = (np.asarray(x) for x in dev)
         for i in range(len(part)):
             out.append((u[i], float(chi2[i]), jtj[i], bool(ok[i]), part[i][2], part[i][3], part[i][1]))
     return out

@@ -1,0 +1,124 @@
+"""``wardjax diagnose`` on a 320 × 240 capture: cold and warm compile cache, beside the figure before.
+
+A capture is written by ``wardjax simulate`` (default material and wood
+texture, and the same with ``--texture none``); ``wardjax diagnose`` then runs
+in a fresh subprocess twice per capture, each capture with its own compile
+cache folder (``wardjax --cache-dir``, :func:`wardjax.run._cache.enable_compile_cache`):
+
+- *cold*: the cache folder empty (every program is compiled);
+- *warm*: the same folder again, now populated by the cold run.
+
+For each run it prints the wall time, the CPU time of the subprocess (user +
+system: what the run cost, less sensitive than the wall time to other
+processes on a shared machine) and the 1-minute load average before and
+after, what diagnose found (effects named, gap before → after), and the ratio
+to the figures measured with this benchmark on the code before the speed work
+(:data:`BEFORE`, recorded with its commit and date: the old code cannot be
+run from this tree). The issue's target (13, item 5): ≤ 15 s warm, ≤ 30 s cold
+on the 2-core machine.
+
+Run alone: ``python -m benchmarks.bench_diagnose [--size 320 240] [--textures wood none] [--json out.json]``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import resource
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+# This benchmark run on main at ee80ae7 (2026-11-25 20:34 UTC, before the speed work) on the 2-core machine
+# shared with other sessions: (wall s, CPU s, 1-min load average at the start) per texture and cache state.
+BEFORE = {
+    "commit": "ee80ae7",
+    "date": "2026-11-25",
+    "runs": {
+        ("wood", "cold"): (52.2, 39.4, 5.1),
+        ("wood", "warm"): (47.5, 30.1, 4.7),
+        ("none", "cold"): (86.0, 59.1, 5.1),
+        ("none", "warm"): (69.4, 45.4, 5.9),
+    },
+}
+TARGET = {"cold": 30.0, "warm": 15.0}
+
+_CLI = [sys.executable, "-c", "import sys; from wardjax.run._cli import main; sys.argv[0] = 'wardjax'; main()"]
+
+
+def _run(args: list[str]) -> tuple[float, float, float, float, subprocess.CompletedProcess]:
+    """Run the CLI with ``args`` in a subprocess: wall s, CPU s (user + system), load before and after."""
+    load0 = os.getloadavg()[0]
+    r0 = resource.getrusage(resource.RUSAGE_CHILDREN)
+    t0 = time.perf_counter()
+    proc = subprocess.run(_CLI + args, capture_output=True, text=True, check=False)
+    wall = time.perf_counter() - t0
+    r1 = resource.getrusage(resource.RUSAGE_CHILDREN)
+    cpu = (r1.ru_utime - r0.ru_utime) + (r1.ru_stime - r0.ru_stime)
+    if proc.returncode != 0:
+        raise RuntimeError(f"wardjax {' '.join(args)} failed ({proc.returncode}): {proc.stderr.strip()[-500:]}")
+    return wall, cpu, load0, os.getloadavg()[0], proc
+
+
+def _found(report_dir: Path) -> str:
+    rep = json.loads((report_dir / "report.json").read_text())
+    names = ", ".join(rep["found"]) or "nothing"
+    return f"{names}; gap " + " → ".join(f"{g:.3f}" for g in rep["gap"])
+
+
+def main(argv=None) -> dict:
+    ap = argparse.ArgumentParser(prog="python -m benchmarks.bench_diagnose")
+    ap.add_argument("--size", type=int, nargs=2, default=(320, 240), metavar=("W", "H"))
+    ap.add_argument("--textures", nargs="+", default=["wood", "none"], choices=["wood", "marble", "none"])
+    ap.add_argument("--json", default=None, help="write the figures here")
+    a = ap.parse_args(argv)
+    size = [str(v) for v in a.size]
+    rows = []
+    print(f"wardjax diagnose, {size[0]} × {size[1]} capture, {os.cpu_count()} CPU cores; before = {BEFORE['commit']}")
+    print(
+        f"{'texture':8s} {'cache':5s} {'wall s':>7s} {'CPU s':>7s} {'load':>9s} "
+        f"{'before s':>9s} {'ratio':>6s} {'CPU before':>10s}  found"
+    )
+    with tempfile.TemporaryDirectory(prefix="bench_diagnose_") as tmp:
+        root = Path(tmp)
+        for tex in a.textures:
+            cap = root / f"capture_{tex}"
+            _run(["simulate", str(cap), "--texture", tex, "--size", *size])
+            cache = root / f"cache_{tex}"  # empty: the first diagnose compiles everything
+            for state in ("cold", "warm"):
+                out = root / f"report_{tex}_{state}"
+                wall, cpu, l0, l1, _ = _run(["--cache-dir", str(cache), "diagnose", str(cap), "--out", str(out)])
+                before = BEFORE["runs"].get((tex, state)) if tuple(a.size) == (320, 240) else None
+                ratio = f"{before[0] / wall:5.2f}×" if before else "     —"
+                row = {
+                    "texture": tex,
+                    "cache": state,
+                    "wall_s": wall,
+                    "cpu_s": cpu,
+                    "load_before": l0,
+                    "load_after": l1,
+                    "before_wall_s": before[0] if before else None,
+                    "before_cpu_s": before[1] if before else None,
+                    "found": _found(out),
+                }
+                rows.append(row)
+                b_wall, b_cpu = (before[0], before[1]) if before else (float("nan"), float("nan"))
+                print(
+                    f"{tex:8s} {state:5s} {wall:7.1f} {cpu:7.1f} {l0:4.1f}→{l1:<4.1f} "
+                    f"{b_wall:9.1f} {ratio} {b_cpu:10.1f}  {row['found']}",
+                    flush=True,
+                )
+    for state, lim in TARGET.items():
+        worst = max(r["wall_s"] for r in rows if r["cache"] == state)
+        print(f"target {state}: ≤ {lim:.0f} s; slowest here {worst:.1f} s ({'met' if worst <= lim else 'NOT met'})")
+    out = {"size": list(a.size), "rows": rows, "before": {f"{k[0]}/{k[1]}": v for k, v in BEFORE["runs"].items()}}
+    if a.json:
+        Path(a.json).write_text(json.dumps(out, indent=2))
+    return out
+
+
+if __name__ == "__main__":
+    main()
