@@ -15,7 +15,12 @@ Independence from the fitter
     - ``saturation``: the lit frame's exposure raised by ``k`` and clipped at
       full scale (the highlight clips);
     - ``gradient_y``: the same ramp along the image rows (even about the
-      stripline: cancels from ``v/v_std``, a null case that is not detectable).
+      stripline: cancels from ``v/v_std``, a null case that is not detectable);
+    - ``blur``: the lit frame blurred by a Gaussian of SD ``σ`` px (a defocus
+      or a soft lens, outside the library);
+    - ``cast``: the lit frame's channels scaled by ``(1 + c, 1, 1 − c)`` (a
+      colour cast of the lamp absent when the standard was calibrated; on the
+      ratio a per-channel factor).
 
     The image is re-quantised to the capture's bit depth.
 
@@ -47,12 +52,16 @@ EDITS = {
 }
 
 
-def make_capture(folder: Path, *, texture: str = "wood", size=(320, 240), seed: int = 0, alpha: float = 0.12, **kw):
-    """A capture ``wardjax simulate`` writes (isotropic material: nothing hidden in the material)."""
+def make_capture(
+    folder: Path, *, texture: str = "wood", size=(320, 240), seed: int = 0, alpha: float = 0.12, eta: float = 0.0, **kw
+):
+    """A capture ``wardjax simulate`` writes: isotropic (nothing hidden in the material) unless ``eta``
+    makes it anisotropic, ``αx, αy = α e^{±η}`` along the tangent (1, 0)."""
     from wardjax.simulate import simulate_capture
     from wardjax.ward import WardParams
 
-    p = WardParams(rho_d=(0.6, 0.5, 0.4), rho_s=0.04, alpha_x=alpha, alpha_y=alpha)
+    ax, ay = alpha * float(np.exp(eta)), alpha * float(np.exp(-eta))
+    p = WardParams(rho_d=(0.6, 0.5, 0.4), rho_s=0.04, alpha_x=ax, alpha_y=ay)
     return simulate_capture(p, folder, seed=seed, image_size=tuple(size), texture=texture, **kw)
 
 
@@ -84,6 +93,12 @@ def edit_capture(src: Path, dst: Path, kind: str | None, amount: float = 0.0) ->
         v = v * (1.0 + amount * r)[:, None, None]
     elif kind == "saturation":
         v = v * amount
+    elif kind == "blur":
+        from scipy.ndimage import gaussian_filter
+
+        v = gaussian_filter(v, sigma=(amount, amount, 0.0), mode="nearest")
+    elif kind == "cast":
+        v = v * np.array([1.0 + amount, 1.0, 1.0 - amount])
     else:
         raise ValueError(f"unknown edit {kind!r}")
     write_image(lit, encode_image(np.clip(v, 0.0, 1.0), enc, bits))

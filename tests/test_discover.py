@@ -270,3 +270,28 @@ def test_full_bench():
     ool = [r for r in s["rows"] if r["hidden"] == bench.OUT_OF_LIBRARY]
     assert all(r["unexplained"] and not r["found"] for r in ool)
     assert all(not r["found"] for r in s["rows"] if r["hidden"] in bench.CANCELLED)
+
+
+def test_twin_signatures_reported_as_not_told_apart():
+    """When two candidates leave the same signature (here an exact copy of the illumination effect under
+    anisotropy's name, the pair the report knows to confuse) on data with a hidden illumination field, the
+    report names both instead of picking one: ``report.ambiguous``, the verdict, report.md and report.json."""
+    from wardjax.effects._library import IlluminationGradient, get_effect
+
+    class Twin(IlluminationGradient):
+        name = "anisotropy"
+
+    case = bench.simulate_case("illumination_gradient", bench.case_seed(0, "illumination_gradient", 0), n_samples=64)
+    effects = (get_effect("illumination_gradient"), Twin())
+    rep = discover(ScanlineModel(), case.data, effects=effects, keep_plot_data=False)
+    assert len(rep.found) == 1 and rep.found[0] in ("illumination_gradient", "anisotropy")
+    (named, other, d), *_ = rep.ambiguous
+    assert named == rep.found[0] and {named, other} == {"illumination_gradient", "anisotropy"} and abs(d) < 1e-3
+    if rep.within_noise:
+        assert f"or {other}: not told apart" in rep.verdict()
+    md = rep.to_markdown()
+    assert "## Not told apart" in md and f"{named} or {other}" in md
+    assert rep.to_dict()["ambiguous"][0]["or"] == other
+    # one effect alone: nothing to confuse it with
+    alone = discover(ScanlineModel(), case.data, effects=effects[:1], keep_plot_data=False)
+    assert alone.found == ["illumination_gradient"] and not alone.ambiguous

@@ -109,3 +109,80 @@ def test_textured_capture_offset_named_untouched_not(tmp_path, offset, named):
     rep = discover(ScanlineModel(cap.config.fit.normalization), capture_data(cap), keep_plot_data=False, texture=True)
     assert rep.settings["texture"] is not None
     assert rep.found == named
+
+
+def _edit_lit(folder, change):
+    """Apply ``change(v, s, t)`` to the linear lit frame of a capture folder (image codec only, nothing of effects);
+    ``(s, t)`` are the pixel's image coordinates from the centre in image widths."""
+    import tomllib
+
+    from wardjax._files import decode_image, encode_image, read_image, write_image
+
+    cfg = tomllib.loads((folder / "capture.toml").read_text())
+    enc, bits = cfg["images"]["encoding"], int(cfg["images"]["bit_depth"])
+    lit = folder / cfg["images"]["lit"]
+    v = decode_image(read_image(lit), enc, bits).astype(np.float64)
+    h, w = v.shape[:2]
+    s = ((np.arange(w) - (w - 1) / 2) / w)[None, :, None]
+    t = ((np.arange(h) - (h - 1) / 2) / w)[:, None, None]
+    write_image(lit, encode_image(np.clip(change(v, s, t), 0.0, 1.0), enc, bits))
+
+
+def test_lit_frame_ramp_survives_the_ratio_as_the_illumination_effect_predicts(tmp_path):
+    """A lit-frame field ``G = (1 + g s)(1 + k s t)`` edited into the image files leaves, in the reconstructed
+    scanlines, the factor ``G(p)/G(p')`` of the point and its mirror: ``exp(b Δs + b_st Δ(st))`` with ``b ≈ g``,
+    ``b_st ≈ k`` (first order) — constant along each scanline for the ramp alone (a scanline is an image
+    column), which an ``x``-only factor on the sample plane is not."""
+    import shutil
+
+    from wardjax.effects._capture import capture_data
+
+    p = wj.WardParams(rho_d=(0.6, 0.5, 0.4), rho_s=0.04, alpha_x=0.12, alpha_y=0.12)
+    base = tmp_path / "base"
+    wj.simulate_capture(p, base, seed=0, image_size=(96, 72), texture="wood", bit_depth=16)
+    d0 = capture_data(wj.load_capture(base))
+    ds, dst = d0.cov["illum_s"], d0.cov["illum_st"]
+    m = np.asarray(d0.mask).all(-1)
+    # for the symmetric rig the field's covariates are Δs = 2 s, Δ(st) = 2 s t: Δs constant along a scanline
+    spread = [np.ptp(ds[i][m[i]]) for i in range(ds.shape[0]) if m[i].any()]
+    assert max(spread) < 1e-9 and np.ptp(ds[m]) > 0.5
+    x = d0.cov["x"]
+    assert np.median([np.ptp(x[i][m[i]]) / np.mean(x[i][m[i]]) for i in range(x.shape[0]) if m[i].sum() > 2]) > 0.1
+    for g, k in ((0.25, 0.0), (0.1, 0.4)):
+        folder = tmp_path / f"edit_{g}_{k}"
+        shutil.copytree(base, folder)
+        _edit_lit(folder, lambda v, s, t: v * (1 + g * s) * (1 + k * s * t))
+        d1 = capture_data(wj.load_capture(folder))
+        ok = np.asarray(d0.mask) & np.asarray(d1.mask)
+        r = np.log(np.asarray(d1.y)[ok] / np.asarray(d0.y)[ok])
+        X = np.stack([np.broadcast_to(c[..., None], ok.shape)[ok] for c in (ds, dst)], -1)
+        (b, b_st), *_ = np.linalg.lstsq(X, r, rcond=None)
+        assert abs(b - g) < 0.1 * g and abs(b_st - k) < 0.05 + 0.15 * k, (b, b_st)
+        assert np.std(r - X @ np.array([b, b_st])) < 0.1 * np.std(r)
+
+
+@pytest.mark.slow  # two discoveries on a textured capture: minutes on two cores
+@pytest.mark.parametrize("case", ["ramp", "anisotropic"])
+def test_textured_capture_illumination_ramp_and_anisotropy_told_apart(tmp_path, case):
+    """A noise-textured capture (4 %) ``simulate_capture`` wrote: a ramp ``1 + 0.25 s`` across the lit frame's
+    columns (edited through the image codec) is named ``illumination_gradient`` first (or reported as not told
+    apart from anisotropy), and an anisotropic material (αx, αy = 0.12 e^{±0.2}, no edit) is named
+    ``anisotropy``, not illumination."""
+    from wardjax.effects._capture import capture_data
+
+    eta = 0.2 if case == "anisotropic" else 0.0
+    p = wj.WardParams(rho_d=(0.6, 0.5, 0.4), rho_s=0.04, alpha_x=0.12 * math.exp(eta), alpha_y=0.12 * math.exp(-eta))
+    folder = tmp_path / case
+    wj.simulate_capture(p, folder, seed=0, image_size=(160, 120), texture="noise", texture_amplitude=0.04)
+    if case == "ramp":
+        _edit_lit(folder, lambda v, s, t: v * (1 + 0.25 * s))
+    cap = wj.load_capture(folder)
+    rep = discover(ScanlineModel(cap.config.fit.normalization), capture_data(cap), keep_plot_data=False, texture=True)
+    named = set(rep.found[:1]) | {b for a, b, _ in rep.ambiguous if rep.found and a == rep.found[0]}
+    if case == "ramp":
+        assert "illumination_gradient" in named, (rep.found, rep.ambiguous, rep.gap)
+        st = rep.steps[0]
+        if st.effect == "illumination_gradient":
+            assert abs(st.params["b"] - 0.25) < 3 * st.stderr["b"] + 0.05, (st.params, st.stderr)
+    else:
+        assert rep.found[:1] == ["anisotropy"], (rep.found, rep.ambiguous, rep.gap)

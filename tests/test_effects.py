@@ -104,7 +104,7 @@ def test_anisotropy_hook_matches_rotated_ward(small):
         ("ambient", {"a": -0.01}),
         ("gamma", {"eps": 0.2}),
         ("gamma", {"eps": -0.1}),
-        ("illumination_gradient", {"b": 0.4}),
+        ("illumination_gradient", {"b": 0.4, "b_st": 0.3}),
     ],
 )
 def test_measurement_inverse(small, name, v):

@@ -124,4 +124,5 @@ def capture_data(cap: Capture, *, max_samples: int = 20_000, band_rows: int = 51
         kind="ratio",
         rho_standard=float(np.mean(cap.rho_standard)),
         censored=cens,
+        camera=rig.camera,
     )

@@ -194,33 +194,62 @@ class GammaMismatch(_ScanlineEffect):
 
 
 class IlluminationGradient(_ScanlineEffect):
-    """Non-uniform illumination or vignetting that breaks the probe/standard symmetry.
+    r"""Non-uniform illumination or vignetting that breaks the probe/standard symmetry.
 
-    Physics: a multiplicative field ``G(p)`` (lamp off the symmetry plane,
-    vignetting centre off the stripline) scales the probe point ``p`` and its
-    mirror ``p'`` on the standard differently; only the part odd in ``x``
-    (across the stripline) survives the ratio. To first order
-    ``G(p)/G(p') = exp(b x / L)`` with ``L`` = 100 mm::
+    Physics: a multiplicative field ``G`` on the lit frame (a lamp off the
+    symmetry plane, a lens's falloff centred off the stripline, a ramp across
+    the image) scales the probe pixel ``p`` and the pixel of its mirror point
+    ``p' = (−x, y)`` on the standard differently. The reconstruction divides
+    the two (image-based paper, eq. "f_r,measured"), so what survives is::
 
-        f_meas = f · exp(b x / L)
+        f_meas = f · G(p) / G(p')
 
-    Per scanline (fixed ``x``) the diffuse part is absorbed by ρd; what
-    remains is the specular amplitude trending with ``x``. Signature:
-    residuals against ``x``.
+    Write ``log G`` to first order in the coordinates ``(s, t)`` of the point —
+    in the image, ``s = (u − c_u)/W``, ``t = (v − c_v)/W`` from the principal
+    point ``(c_u, c_v)`` and the image width ``W`` when the data carry the
+    camera (:func:`~wardjax.effects.scanline_data`, ``camera=``); else on the
+    sample plane, ``s = x/L``, ``t = y/L`` with ``L`` = 100 mm — with the cross
+    term that a tilted field needs::
+
+        log G(q) = b₀ + b_s s + b_t t + b_st s t
+        log f_meas − log f = b_s Δs + b_st Δ(st)         (Δ· = ·(p) − ·(p'))
+
+    ``b₀`` cancels, and ``b_t Δt`` vanishes in the paper's rig (camera and lamp
+    in the symmetry plane map ``p'`` to the mirror pixel, ``t(p') = t(p)``,
+    ``s(p') = −s(p)``), so ``Δs = 2 s(p)``, ``Δ(st) = 2 s t``. A ramp across
+    the image columns, ``G = 1 + g s``, gives ``b_s = g`` to first order and a
+    factor **constant along each scanline** (a scanline is an image column):
+    the per-scanline ρd absorbs it on the diffuse term, and what remains is the
+    specular amplitude trending across scanlines with ``s`` — at a fixed
+    half-vector azimuth, not following it (anisotropy follows the azimuth). On
+    the sample plane a column is not a line of constant ``x`` (perspective:
+    ``x ∝ s · depth(y)``), which is why an ``x``-only factor, varying along
+    each scanline, missed the image ramp on the diffuse term. ``b_st`` (a field
+    tilted across the image, or a lamp off the plane, whose
+    ``log E(p)/E(p') ∝ x/r²`` falls along the scanline) moves the diffuse level
+    along each scanline in proportion to ``s``.
+
+    Signature: residuals against ``s`` (the image column); covariate ``x``.
     """
 
     name = "illumination_gradient"
     title = "illumination / vignetting asymmetric about the stripline"
     side = "measurement"
     covariate = "x"
-    requires = ("x",)
-    params = (Param("b", 0.0, scale=0.1, doc="log-gradient across the stripline per 100 mm"),)
+    requires = ("illum_s", "illum_st")
+    params = (
+        Param("b", 0.0, scale=0.1, doc="log-gradient of the field across the stripline (per image width or 100 mm)"),
+        Param("b_st", 0.0, scale=0.3, doc="cross term s·t of the field's log (tilt)"),
+    )
+
+    def _log_factor(self, v, ctx):
+        return (v["b"] * ctx["illum_s"] + v["b_st"] * ctx["illum_st"])[..., None]
 
     def measure(self, v, f, ctx):
-        return f * jnp.exp(v["b"] * ctx["x"][..., None] / 100.0)
+        return f * jnp.exp(self._log_factor(v, ctx))
 
     def unmeasure(self, v, y, ctx):
-        k = jnp.exp(-v["b"] * ctx["x"][..., None] / 100.0)
+        k = jnp.exp(-self._log_factor(v, ctx))
         return y * k, k
 
 

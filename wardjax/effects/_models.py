@@ -119,6 +119,7 @@ def scanline_data(
     kind: str = "ratio",
     rho_standard: float = 0.99,
     censored=None,
+    camera=None,
 ) -> ScanlineData:
     """Build :class:`ScanlineData` from arrays, checking shapes at the boundary.
 
@@ -146,6 +147,10 @@ def scanline_data(
         Optional ``(S, N)`` or ``(S, N, C)`` bool: ``f_r`` there is a lower
         bound (clipped at a known level), to be fitted with the censored
         likelihood rather than dropped (see :class:`ScanlineData`).
+    camera
+        Optional :class:`~wardjax.geometry.Camera` that took the image: with
+        ``points``, the illumination field is then read in image coordinates
+        (:func:`_field_coordinates`).
     """
     f = np.asarray(f_r, np.float64)
     if f.ndim == 2:
@@ -177,6 +182,7 @@ def scanline_data(
             raise ValueError(f"points must have shape {(s, n, 3)}, got {pts.shape}")
         cov["x"] = pts[..., 0]
         cov["y"] = pts[..., 1]
+        cov["illum_s"], cov["illum_st"] = _field_coordinates(pts, camera)
         if lamp is not None:
             lp = np.asarray(lamp, np.float64)
             lp = lp[:, None, :] if lp.ndim == 2 else lp[None, None, :]
@@ -207,6 +213,29 @@ def scanline_data(
         f_std=float(rho_standard) / np.pi,
         available=avail,
     )
+
+
+def _field_coordinates(points: np.ndarray, camera=None) -> tuple[np.ndarray, np.ndarray]:
+    """``Δs`` and ``Δ(st)`` between each point and its mirror point (the illumination field's covariates).
+
+    ``(s, t)`` are image coordinates from the principal point in image widths
+    when ``camera`` is given, else ``(x, y)/100 mm``; ``Δ· = ·(p) − ·(p')`` with
+    ``p' = (−x, y, z)`` (see :class:`~wardjax.effects._library.IlluminationGradient`).
+    """
+    from ..geometry import mirror_point, project
+
+    def st(q):
+        if camera is None:
+            return q[..., 0] / 100.0, q[..., 1] / 100.0
+        uv, _ = project(camera, q)
+        cu, cv = camera.principal
+        return (uv[..., 0] - cu) / camera.width, (uv[..., 1] - cv) / camera.width
+
+    fin = np.all(np.isfinite(points), axis=-1, keepdims=True)
+    q = np.where(fin, points, 0.0)
+    (s1, t1), (s2, t2) = st(q), st(mirror_point(q))
+    ds, dst = np.nan_to_num(s1 - s2), np.nan_to_num(s1 * t1 - s2 * t2)
+    return ds, dst
 
 
 class ThresholdData(eqx.Module):

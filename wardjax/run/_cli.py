@@ -348,7 +348,7 @@ def fit_cmd(
 @click.option("--rho-s", type=float, default=0.04, show_default=True)
 @click.option("--alpha-x", type=float, default=0.12, show_default=True)
 @click.option("--alpha-y", type=float, default=0.15, show_default=True)
-@click.option("--texture", type=click.Choice(["wood", "marble", "none"]), default="wood", show_default=True)
+@click.option("--texture", type=click.Choice(["wood", "marble", "noise", "none"]), default="wood", show_default=True)
 @click.option("--encoding", type=click.Choice(["srgb", "gamma2.2", "linear"]), default="srgb", show_default=True)
 @click.option("--bit-depth", type=click.Choice(["8", "16"]), default="8", show_default=True)
 @click.option("--format", "image_format", type=click.Choice(["png", "tif", "jpg"]), default="png", show_default=True)

@@ -22,7 +22,7 @@ import numpy as np
 __all__ = ["PLANE_TEXTURES", "TEXTURE_KINDS", "plane_texture", "procedural_texture"]
 
 # The ρd modulations of simulated captures, on the sample plane (mm).
-PLANE_TEXTURES = ("wood", "marble", "none")
+PLANE_TEXTURES = ("wood", "marble", "noise", "none")
 
 TEXTURE_KINDS = ("noise", "wood", "marble", "wood_rings", "bricks")
 
@@ -133,6 +133,8 @@ def plane_texture(kind: str, x, y, *, amplitude: float = 0.08, seed: int = 0) ->
 
     ``"wood"``: growth rings running along y (slightly wavy), with fine grain;
     ``"marble"``: veins, a turbulent sine pattern across the surface;
+    ``"noise"``: isotropic broadband noise (wavelengths 2–40 mm, amplitude
+    spectrum ∝ wavelength, a 1/f field), no preferred direction;
     ``"none"``: ``m = 1``. The modulation stays within ``1 ± amplitude``.
     """
     rng = np.random.default_rng(seed)
@@ -150,6 +152,10 @@ def plane_texture(kind: str, x, y, *, amplitude: float = 0.08, seed: int = 0) ->
         phase = 2 * np.pi * (np.cos(th) * x + np.sin(th) * y) / rng.uniform(40.0, 70.0)
         m = np.sin(phase + 2.5 * _smooth_noise(x, y, rng))
         m = np.sign(m) * np.abs(m) ** 0.5  # sharpen the veins
+    elif kind == "noise":
+        bands = [(2.0, 5.0), (5.0, 12.0), (12.0, 40.0)]
+        m = sum(lam[0] * _smooth_noise(x, y, rng, waves=24, wavelength=lam) for lam in bands)
+        m = np.tanh(m / np.sqrt(sum(lam[0] ** 2 for lam in bands)) / 1.5)
     else:
-        raise ValueError(f"texture={kind!r} is not one of 'wood', 'marble', 'none' (or a callable)")
+        raise ValueError(f"texture={kind!r} is not one of 'wood', 'marble', 'noise', 'none' (or a callable)")
     return 1.0 + amplitude * np.clip(m, -1.0, 1.0)
