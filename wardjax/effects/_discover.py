@@ -222,11 +222,20 @@ def _check_inputs(model, data, alpha: float) -> None:
     Checked up front so that a mismatch fails with a clear message instead of
     deep inside a traced solve.
     """
-    for attr in ("kind", "base_params", "residuals", "predict", "covariates", "n_profiled"):
+    for attr in (
+        "kind",
+        "data_kinds",
+        "library_kind",
+        "supports",
+        "base_params",
+        "residuals",
+        "predict",
+        "covariates",
+        "n_profiled",
+    ):
         if not hasattr(model, attr):
             raise TypeError(f"model must provide {attr!r} (a ScanlineModel or ThresholdModel), got {type(model)!r}")
-    kinds = getattr(model, "data_kinds", ("ratio", "brdf") if model.kind == "scanline" else ("threshold",))
-    if getattr(data, "kind", None) not in kinds:
+    if getattr(data, "kind", None) not in model.data_kinds:
         raise TypeError(f"data of kind {getattr(data, 'kind', type(data))!r} do not suit a {model.kind} model")
     if not 0 < alpha < 1:
         raise ValueError(f"alpha must be in (0, 1), got {alpha}")
@@ -238,8 +247,8 @@ def _split_library(model, data, effects):
     Effects of another model kind are dropped silently; those the data cannot
     test are kept aside so that the report can say why they were not tried.
     """
-    lib = library(getattr(model, "library_kind", model.kind)) if effects is None else tuple(effects)
-    supports = getattr(model, "supports", lambda e: e.model == model.kind)  # a model may take another kind's
+    lib = library(model.library_kind) if effects is None else tuple(effects)
+    supports = model.supports  # a model may take another kind's effects (the screen model: scanline ones)
     testable, skipped = [], []
     for e in lib:
         if not supports(e):

@@ -351,7 +351,14 @@ class ScanlineModel:
 
     normalization: str = "ward1992"
     kind = "scanline"
+    data_kinds = ("ratio", "brdf")  # ScanlineData.kind values it fits
+    library_kind = "scanline"  # whose library() its candidates come from
     title = "isotropic Ward, ρd per scanline and channel, shared ρs and α"
+
+    @staticmethod
+    def supports(e) -> bool:
+        """Whether the model implements ``e``'s forward change: every scanline effect."""
+        return e.model == "scanline"
 
     def __post_init__(self):
         if self.normalization not in NORMALIZATIONS:
@@ -522,7 +529,14 @@ class ThresholdModel:
     """One straight line ``SD = a + b · PPB`` for every lightness (paper section 6, Fig. 8a)."""
 
     kind = "threshold"
+    data_kinds = ("threshold",)
+    library_kind = "threshold"
     title = "one PPB → lobe-SD line for all lightnesses"
+
+    @staticmethod
+    def supports(e) -> bool:
+        """Whether the model implements ``e``'s forward change: every threshold effect."""
+        return e.model == "threshold"
 
     def base_params(self, data: ThresholdData) -> tuple[Param, ...]:
         x, y, s = (np.asarray(a) for a in (data.ppb, data.sd, data.sigma))
