@@ -171,7 +171,6 @@ def test_the_fit_path_never_decodes_a_whole_image(captures, tmp_path, monkeypatc
     item, tb = fit_one(captures / "tiles", "c", tmp_path / "out", "2026-11-26T00:00:00Z", force=True)
     assert item.status == "ok", (item.error, tb)
     h, w = 72, 96
-    print(reads)
     assert reads and all(n < h * w for _, _, n in reads)  # no read decoded a whole image
     # band reads: at most a band's rows plus the 16-row tiles around them
     bands = [n for _, (rows, cols), n in reads if rows <= band_rows]
