@@ -128,6 +128,7 @@ class TiffImage(ImageSource):
         self._row_bytes = row_bytes
         contiguous = (
             page.compression == 1
+            and page.fillorder == 1
             and not page.is_tiled
             and bool(page.is_contiguous)
             and int(sum(page.databytecounts)) >= self.height * row_bytes
