@@ -15,6 +15,8 @@ import numpy as np
 import pytest
 import tifffile
 import tomlkit
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 import wardjax as wj
 from wardjax.capture import CaptureError, CaptureImages, _images
@@ -63,6 +65,28 @@ def test_tiff_windows_equal_the_whole_read(tmp_path, rng, layout, channels, dtyp
     src.read(slice(20, 22), slice(0, 37))
     seg_rows = {"one_strip": 0, "strips": 7, "zlib_strips": 5, "lzw_predictor": 4, "zlib_tiles": 16}.get(layout, 9)
     assert 0 < src.largest_read <= (2 + 2 * seg_rows) * 37 + 2 * 16 * 16
+
+
+@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(
+    size=st.tuples(st.integers(1, 40), st.integers(1, 40)),
+    layout=st.one_of(
+        st.fixed_dictionaries({"rowsperstrip": st.integers(1, 45)}),
+        st.fixed_dictionaries({"rowsperstrip": st.integers(1, 45), "compression": st.sampled_from(["zlib", "lzw"])}),
+        st.fixed_dictionaries(
+            {"tile": st.sampled_from([(16, 16), (16, 32), (32, 16)]), "compression": st.just("zlib")}
+        ),
+    ),
+    window=st.tuples(st.integers(0, 45), st.integers(0, 45), st.integers(0, 45), st.integers(0, 45)),
+)
+def test_any_tiff_window_equals_the_whole_read(tmp_path, size, layout, window):
+    a = np.arange(size[0] * size[1] * 3, dtype=np.uint16).reshape(*size, 3) * 7
+    path = tmp_path / "f.tif"
+    tifffile.imwrite(path, a, photometric="rgb", **layout)
+    src = open_image(path, "f.tif")
+    assert isinstance(src, TiffImage)
+    rows, cols = slice(*sorted(window[:2])), slice(*sorted(window[2:]))
+    np.testing.assert_array_equal(src.read(rows, cols), tifffile.imread(path)[rows, cols])
 
 
 def test_tiff_layouts_outside_bands_are_read_whole(tmp_path, rng):
