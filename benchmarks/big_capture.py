@@ -11,7 +11,9 @@ reconstruct in bands, bin, fit, ρd texture band by band, outputs: tiled
 child's resident memory (psutil, every 20 ms) and kills it past
 ``--limit-gb`` (the machine is shared); the child reports its own peak
 (``ru_maxrss``) and the time of each phase. The 12 MP run is the reference
-the 50 MP one is compared with. Target: 50 MP in ≤ 8 GB.
+the 50 MP one is compared with. Target: 50 MP in ≤ 8 GB. The images are
+read in bands (``read_in_bands`` in the output; ``--tiles`` makes the 50 MP
+TIFFs compressed and tiled, read tile by tile, instead of plain strips).
 """
 
 from __future__ import annotations
@@ -56,7 +58,12 @@ def timed(name, fn):
             phases[name] = time.perf_counter() - t
     return run
 import wardjax.run._batch as batch
-batch.load_capture = timed("load_s", batch.load_capture)
+read_in_bands = []
+def load(path, _load=timed("load_s", batch.load_capture)):
+    cap = _load(path)
+    read_in_bands.append(bool(getattr(getattr(cap, "images", None), "banded", False)))  # before banding: False
+    return cap
+batch.load_capture = load
 _fit_capture_timed = timed("fit_s", fit_capture)
 batch.FITTERS["scanline"] = lambda cap, out, created: timed("outputs_s", write)(_fit_capture_timed(cap), out, created=created)
 t1 = time.perf_counter()
@@ -67,12 +74,12 @@ p = item.params["params"]
 print(json.dumps({**phases, "import_s": t1 - t0, "total_s": t2 - t1,
                   "peak_rss_gb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2**20,
                   "rho_s": p["rho_s"], "alpha_x": p["alpha_x"], "alpha_y": p["alpha_y"],
-                  "binning": item.params["fit"]["diagnostics"]["binning"],
+                  "binning": item.params["fit"]["diagnostics"]["binning"], "read_in_bands": all(read_in_bands),
                   "texture_region": json.loads((Path(sys.argv[2]) / "big" / "texture.json").read_text())["region_source"]}))
 """
 
 
-def upscale_capture(src: Path, dst: Path, width: int, height: int, rows: int = 256) -> dict:
+def upscale_capture(src: Path, dst: Path, width: int, height: int, rows: int = 256, tiles: bool = False) -> dict:
     """Make a ``width × height`` capture from ``src`` cheaply: its images enlarged by pixel replication.
 
     The same scene seen by a camera of ``s = width / W`` times the focal length
@@ -83,6 +90,8 @@ def upscale_capture(src: Path, dst: Path, width: int, height: int, rows: int = 2
     memory: a 50 MP capture costs seconds, where simulating one costs minutes
     and ~7 GB. The images are the source's (texture, noise) seen larger, not a
     new rendering; the fit still recovers the material (it is the same).
+    ``tiles`` writes zlib-compressed 256 × 256 tiles instead of plain strips
+    (the fit then decodes the tiles each band overlaps, not positioned reads).
     """
     import numpy as np
     import tifffile
@@ -109,9 +118,18 @@ def upscale_capture(src: Path, dst: Path, width: int, height: int, rows: int = 2
             for r0 in range(0, height, rows):
                 yield np.ascontiguousarray(image[src_rows[r0 : r0 + rows]][:, src_cols])
 
-        tifffile.imwrite(
-            dst / name, strips(), shape=(height, width, 3), dtype=image.dtype, photometric="rgb", rowsperstrip=rows
-        )
+        def tile_rows(image=image, t=256):
+            for r0 in range(0, height, t):
+                band = image[src_rows[r0 : r0 + t]][:, src_cols]
+                for c0 in range(0, width, t):
+                    tile = np.zeros((t, t, 3), image.dtype)
+                    part = band[:, c0 : c0 + t]
+                    tile[: part.shape[0], : part.shape[1]] = part
+                    yield tile
+
+        layout = {"tile": (256, 256), "compression": "zlib"} if tiles else {"rowsperstrip": rows}
+        data = tile_rows() if tiles else strips()
+        tifffile.imwrite(dst / name, data, shape=(height, width, 3), dtype=image.dtype, photometric="rgb", **layout)
         del image
     return {"upscale_s": time.perf_counter() - t, "from": f"{w0}×{h0}"}
 
@@ -139,20 +157,20 @@ def _run_watched(args: list[str], limit_gb: float) -> tuple[dict, float]:
     return json.loads(out.strip().splitlines()[-1]), peak
 
 
-def measure(mp: int, tmp: Path, limit_gb: float, upscale: bool = True) -> dict:
+def measure(mp: int, tmp: Path, limit_gb: float, upscale: bool = True, tiles: bool = False) -> dict:
     """Simulate and fit one capture of ``mp`` megapixels; the figures of both children."""
     w, h = SIZES[mp]
-    folder = tmp / f"cap{mp}"
+    folder = tmp / (f"cap{mp}" + ("-tiles" if tiles and mp != 12 else ""))
     sim, sim_peak = {"simulate_s": float("nan"), "peak_rss_gb": float("nan")}, float("nan")
     if (folder / "capture.toml").exists():  # --work: a capture made by an earlier run is reused
         pass
     elif mp != 12 and upscale and (tmp / "cap12" / "capture.toml").exists():
-        sim = upscale_capture(tmp / "cap12", folder, w, h)
+        sim = upscale_capture(tmp / "cap12", folder, w, h, tiles=tiles)
     else:
         sim, sim_peak = _run_watched([sys.executable, "-c", SIMULATE, str(folder), str(w), str(h)], limit_gb)
     fit, fit_peak = _run_watched([sys.executable, "-c", FIT, str(folder), str(tmp / f"out{mp}")], limit_gb)
     return {
-        "size": f"{w}×{h}",
+        "size": f"{w}×{h}" + (" tiles" if tiles and mp != 12 else ""),
         "mp": w * h / 1e6,
         "simulate": sim,
         "simulate_sampled_gb": sim_peak,
@@ -161,11 +179,13 @@ def measure(mp: int, tmp: Path, limit_gb: float, upscale: bool = True) -> dict:
     }
 
 
-def main(sizes=(12, 50), limit_gb: float = 9.5, work: str | None = None, upscale: bool = True) -> list[dict]:
+def main(
+    sizes=(12, 50), limit_gb: float = 9.5, work: str | None = None, upscale: bool = True, tiles: bool = False
+) -> list[dict]:
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         for mp in sizes:
-            r = measure(mp, Path(work or tmp), limit_gb, upscale)
+            r = measure(mp, Path(work or tmp), limit_gb, upscale, tiles)
             rows.append(r)
             print(json.dumps(r), flush=True)
     print(f"load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores (wall times grow with it)")
@@ -177,7 +197,7 @@ def main(sizes=(12, 50), limit_gb: float = 9.5, work: str | None = None, upscale
         )
         print(
             f"    αx {r['alpha_x']:.4f} αy {r['alpha_y']:.4f} ρs {r['rho_s']:.4f} binning {r['binning']}; "
-            f"texture.json: {r['texture_region']}"
+            f"texture.json: {r['texture_region']}; images read in bands: {r.get('read_in_bands', False)}"
         )
     if len(rows) == 2:
         a, b = rows
@@ -198,5 +218,10 @@ if __name__ == "__main__":
         action="store_true",
         help="simulate the 50 MP capture (minutes, ~7 GB) instead of enlarging the 12 MP one (upscale_capture)",
     )
+    ap.add_argument(
+        "--tiles",
+        action="store_true",
+        help="write the enlarged captures as zlib-compressed 256² tiles (read tile by tile) instead of plain strips",
+    )
     a = ap.parse_args()
-    main(tuple(int(s) for s in a.sizes.split(",")), a.limit_gb, a.work, not a.simulate)
+    main(tuple(int(s) for s in a.sizes.split(",")), a.limit_gb, a.work, not a.simulate, a.tiles)

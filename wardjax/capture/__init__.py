@@ -2,6 +2,9 @@
 
 from ._errors import CAPTURE_FILE as CAPTURE_FILE
 from ._errors import CaptureError as CaptureError
+from ._images import CaptureImages as CaptureImages
+from ._images import ImageSource as ImageSource
+from ._images import Window as Window
 from ._load import IMAGE_SUFFIXES as IMAGE_SUFFIXES
 from ._load import Capture as Capture
 from ._load import load_capture as load_capture
@@ -28,6 +31,9 @@ from ._rules import one_line as one_line
 __all__ = [
     "CAPTURE_FILE",
     "CaptureError",
+    "CaptureImages",
+    "ImageSource",
+    "Window",
     "IMAGE_SUFFIXES",
     "Capture",
     "load_capture",

@@ -3,13 +3,15 @@
 from __future__ import annotations
 
 import dataclasses
+import functools
 from pathlib import Path
 
 import numpy as np
 
-from .._files import RAW_SUFFIXES, as_rgb, decode_lut, read_image, sha256
+from .._files import RAW_SUFFIXES, decode_lut, sha256
 from ..geometry import Camera, Rig
 from ._errors import CAPTURE_FILE, CaptureError
+from ._images import CaptureImages, ImageSource, Window, open_image
 from ._rules import RuleError, check_image_pair, check_lit_exposure
 from ._schema import CaptureFile, parse_capture_file, unit_direction
 from ._smartphone import SmartphoneCapture, check_relative, load_smartphone_capture
@@ -23,6 +25,13 @@ IMAGE_SUFFIXES = (".png", ".tif", ".tiff", ".jpg", ".jpeg") + RAW_SUFFIXES
 class Capture:
     """A loaded, validated capture.
 
+    The images are held as *sources* (:class:`~wardjax.capture.CaptureImages`):
+    a TIFF is read by windows of rows when one is asked for
+    (:meth:`window`), so that fitting a 50 MP capture never holds a whole
+    image; PNG and JPEG (one compressed stream each) are decoded at load
+    and held as codes. :attr:`lit`, :attr:`dark` and :attr:`lit_clipped`
+    build the whole image on first access and keep it.
+
     Attributes
     ----------
     path
@@ -33,10 +42,8 @@ class Capture:
         The validated :class:`CaptureFile`.
     rig
         The :class:`~wardjax.geometry.Rig` (camera, lamp, regions).
-    lit, dark
-        ``(H, W, 3)`` float32 linear images (full scale 1); ``dark`` may be ``None``.
-    lit_clipped
-        ``(H, W, 3)`` bool: the lit value is the largest code (clipped).
+    images
+        The lit and dark image sources and their decoding.
     saturation
         Linear level from which a value counts as clipped.
     checksums
@@ -47,9 +54,7 @@ class Capture:
     name: str
     config: CaptureFile
     rig: Rig
-    lit: np.ndarray
-    dark: np.ndarray | None
-    lit_clipped: np.ndarray
+    images: CaptureImages
     saturation: float
     checksums: dict[str, str]
 
@@ -66,8 +71,31 @@ class Capture:
     def rho_standard(self) -> np.ndarray:
         return np.asarray(self.config.rho_standard, float)
 
+    def window(self, rows: slice, cols: slice = slice(None)) -> Window:
+        """``rows × cols`` of the lit and dark images, linear float32, and where lit is clipped.
 
-def _load_image(folder: Path, name: str, field: str, cfg: CaptureFile):
+        Only the rows asked for are decoded (a TIFF's overlapping segments).
+        """
+        return self.images.window(rows, cols)
+
+    @functools.cached_property
+    def lit(self) -> np.ndarray:
+        """``(H, W, 3)`` float32 linear lit image (full scale 1), built on first access."""
+        return self.images.whole("lit")
+
+    @functools.cached_property
+    def dark(self) -> np.ndarray | None:
+        """``(H, W, 3)`` float32 linear dark image, or ``None``; built on first access."""
+        return None if self.images.dark is None else self.images.whole("dark")
+
+    @functools.cached_property
+    def lit_clipped(self) -> np.ndarray:
+        """``(H, W, 3)`` bool: the lit value is the largest code (clipped); built on first access."""
+        return self.images.whole("clipped")
+
+
+def _open_image(folder: Path, name: str, field: str, cfg: CaptureFile) -> tuple[ImageSource, str]:
+    """The source of one image named by ``field``, its kind, bit depth and size checked (from its header)."""
     path = folder / name
     check_relative(name, field)
     if path.is_dir():
@@ -90,26 +118,35 @@ def _load_image(folder: Path, name: str, field: str, cfg: CaptureFile):
     if suffix in (".jpg", ".jpeg") and bits != 8:
         raise CaptureError(CAPTURE_FILE, "images.bit_depth", f"JPEG {name} is 8-bit, got bit_depth = {bits}")
     try:
-        stored = read_image(path, rgb=False)
-        channels = 1 if stored.ndim == 2 else int(stored.shape[-1])
-        codes = as_rgb(stored)
-        del stored
+        source = open_image(path, name)
     except Exception as e:  # any reader failure is a corrupt file to the user
-        reason = str(e).splitlines()[0] if str(e) else type(e).__name__
-        raise CaptureError(name, None, f"cannot read the image ({reason[:160]})") from None
+        raise CaptureError(name, None, f"cannot read the image ({_reason(e)})") from None
     want = np.uint8 if bits == 8 else np.uint16
-    if codes.dtype != want:
+    if source.dtype != want:
         raise CaptureError(
             name,
             None,
-            f"holds {codes.dtype} values but {CAPTURE_FILE} images.bit_depth = {bits} (expected {np.dtype(want).name})",
+            f"holds {source.dtype} values but {CAPTURE_FILE} images.bit_depth = {bits} "
+            f"(expected {np.dtype(want).name})",
         )
     w, h = cfg.camera.image_size
-    if codes.shape[:2] != (h, w):
+    if (source.height, source.width) != (h, w):
         raise CaptureError(
-            name, None, f"is {codes.shape[1]}×{codes.shape[0]} pixels but {CAPTURE_FILE} camera.image_size = [{w}, {h}]"
+            name, None, f"is {source.width}×{source.height} pixels but {CAPTURE_FILE} camera.image_size = [{w}, {h}]"
         )
-    return codes, sha256(path), channels
+    return source, sha256(path)
+
+
+def _reason(e: Exception) -> str:
+    return ((str(e).splitlines() or [""])[0] or type(e).__name__)[:160]
+
+
+def _extremes(source: ImageSource) -> tuple[int, int]:
+    """The smallest and largest code of an image, every band of it decoded once (a corrupt segment fails here)."""
+    try:
+        return source.extremes()
+    except Exception as e:
+        raise CaptureError(source.name, None, f"cannot read the image ({_reason(e)})") from None
 
 
 def load_capture(path) -> Capture | SmartphoneCapture:
@@ -137,30 +174,28 @@ def load_capture(path) -> Capture | SmartphoneCapture:
     if cfg.method == "smartphone":
         return load_smartphone_capture(folder, cfg)
     checksums = {CAPTURE_FILE: sha256(folder / CAPTURE_FILE)}
-    lit_codes, checksums[cfg.images.lit], lit_ch = _load_image(folder, cfg.images.lit, "images.lit", cfg)
+    lit, checksums[cfg.images.lit] = _open_image(folder, cfg.images.lit, "images.lit", cfg)
     enc, bits = cfg.images.encoding, cfg.images.bit_depth
     top = (1 << bits) - 1
     lut = decode_lut(enc, bits)
-    lit = lut[lit_codes]
-    clipped = lit_codes == top
-    if clipped.all():
+    # The pixel rules, from one banded pass over each image (the whole of neither is held);
+    # lit's first, as each image is checked before the next is opened.
+    lo, hi = _extremes(lit)
+    if lo == top:
         raise CaptureError(cfg.images.lit, None, "every pixel is saturated (at the largest code); reduce the exposure")
-    try:
-        check_lit_exposure(cfg.images.lit, lit_codes, float(lit.max()), cfg.fit.noise_floor)
+    try:  # the encodings are increasing: the brightest linear value is that of the largest code
+        check_lit_exposure(cfg.images.lit, np.array([lo, hi], lit.dtype), float(lut[hi]), cfg.fit.noise_floor)
     except RuleError as e:
         raise CaptureError(e.field, None, e.message) from None
     dark = None
     if cfg.images.dark is not None:
-        dark_codes, checksums[cfg.images.dark], dark_ch = _load_image(folder, cfg.images.dark, "images.dark", cfg)
+        dark, checksums[cfg.images.dark] = _open_image(folder, cfg.images.dark, "images.dark", cfg)
         try:
-            check_image_pair(
-                cfg.images.lit, (*lit_codes.shape[:2], lit_ch), cfg.images.dark, (*dark_codes.shape[:2], dark_ch)
-            )
+            shapes = [(im.height, im.width, im.channels) for im in (lit, dark)]
+            check_image_pair(cfg.images.lit, shapes[0], cfg.images.dark, shapes[1])
         except RuleError as e:
             raise CaptureError(e.field, None, e.message) from None
-        dark = lut[dark_codes]
-        del dark_codes
-    del lit_codes
+        _extremes(dark)
     saturation = float(0.5 * (lut[top] + lut[top - 1]))
     cam = Camera(
         position=cfg.rig.camera,
@@ -173,4 +208,4 @@ def load_capture(path) -> Capture | SmartphoneCapture:
     )
     rig = Rig(lamp=cfg.rig.lamp, camera=cam, probe=cfg.regions.probe, standard=cfg.regions.standard)
     name = cfg.name or folder.resolve().name
-    return Capture(folder, name, cfg, rig, lit, dark, clipped, saturation, checksums)
+    return Capture(folder, name, cfg, rig, CaptureImages(lit, dark, lut, top), saturation, checksums)

@@ -179,7 +179,12 @@ def check_image_pair(lit_name: str, lit: tuple[int, int, int], dark_name: str, d
 
 
 def check_lit_exposure(name: str, codes: np.ndarray, linear_max: float, floor: float) -> None:
-    """Refuse a lit image with nothing to measure: black everywhere (below ``floor``) or one value everywhere."""
+    """Refuse a lit image with nothing to measure: black everywhere (below ``floor``) or one value everywhere.
+
+    ``codes`` is the image's codes, or only its smallest and largest (what
+    :func:`~wardjax.load_capture` gathers band by band); ``linear_max`` the
+    brightest linear value.
+    """
     if linear_max <= floor:
         raise RuleError(
             name, f"is black: its brightest value {linear_max:.3g} is at or below the noise floor {floor:g}"

@@ -238,12 +238,12 @@ def prepare_bands(cap, *, band_rows: int = 512, dtype: DTypeLike = np.float32) -
             return BandSetup(probe, None, {}, dtype)
         sigma = cfg.fit.smooth_standard_px
         box = _bbox(on_std, int(math.ceil(4 * sigma)) + 2) or (slice(0, min(2, h)), slice(0, min(2, w)))
-        lit_std, clip_std = cap.lit[box], cap.lit_clipped[box]
-        dark_std = np.zeros_like(lit_std) if cap.dark is None else cap.dark[box]
+        lit_std, dark_std, clip_std = cap.window(*box)  # the standard's crop only is read
+        dark_std = np.zeros_like(lit_std) if dark_std is None else dark_std
         if sigma > 0:
             std_mask = on_std[box] & ~clip_std.any(axis=-1)
             lit_std = _smooth_on(lit_std, std_mask, sigma)
-            dark_std = dark_std if cap.dark is None else _smooth_on(dark_std, std_mask, sigma)
+            dark_std = dark_std if cap.images.dark is None else _smooth_on(dark_std, std_mask, sigma)
         std = np.concatenate([lit_std, dark_std, clip_std.astype(np.float32)], -1)
         del lit_std, dark_std, clip_std
         kernel = {
@@ -267,8 +267,10 @@ def reconstruct_bands(cap, setup: BandSetup, step: int) -> Iterator[tuple[slice,
     of the band and the band's values over the box's columns (see
     :class:`Reconstruction`), so that a caller keeps only what it needs of
     each band (:func:`wardjax.fit_capture` bins them for the fit and extracts
-    ρd from them; a whole image of each need not exist). The kernel sees every
-    band padded to one bucketed shape (one compiled program).
+    ρd from them; a whole image of each need not exist). The images are read
+    the same way: each band's rows of lit and dark only
+    (:meth:`~wardjax.Capture.window`). The kernel sees every band padded to
+    one bucketed shape (one compiled program).
     """
     if setup.box is None:
         return
@@ -281,16 +283,17 @@ def reconstruct_bands(cap, setup: BandSetup, step: int) -> Iterator[tuple[slice,
     zeros = np.zeros(band + (3,), np.float32)
     for r0 in range(rows_p.start, rows_p.stop, step):
         r1 = min(r0 + step, rows_p.stop)
-        n, m, sl = r1 - r0, cols.stop - cols.start, (slice(r0, r1), cols)
-        dark = zeros if cap.dark is None else pad(cap.dark[sl], band)
+        n, m = r1 - r0, cols.stop - cols.start
+        lit, dark, clipped = cap.window(slice(r0, r1), cols)  # the band's rows only are read and decoded
+        dark = zeros if dark is None else pad(dark, band)
         with jax.enable_x64(dtype == np.float64):
             out = _reconstruct_band(
                 kern["k"],
                 np.arange(r0, r0 + band[0], dtype=dtype),
                 jnp.asarray(cols.start, dtype),
-                pad(cap.lit[sl], band),
+                pad(lit, band),
                 dark,
-                pad(cap.lit_clipped[sl], band),
+                pad(clipped, band),
                 kern["std"],
                 kern["std_size"],
                 kern["offset"],

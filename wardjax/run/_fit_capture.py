@@ -169,7 +169,7 @@ def fit_capture(cap: Capture, *, max_fit_samples: int = 50_000, band_rows: int =
             "camera",
             "no pixel of the image sees the probe; check rig.camera, camera.look_at and regions.probe",
         )
-    sat = float(np.mean(np.any(cap.lit_clipped, axis=-1)[probe]))
+    sat = _clipped_fraction(cap, setup, band_rows)
     if sat > MAX_CLIPPED_FRACTION:
         raise CaptureError(
             lit_name, None, f"{sat:.0%} of the probe's pixels are saturated (at the largest code); reduce the exposure"
@@ -234,6 +234,18 @@ def fit_capture(cap: Capture, *, max_fit_samples: int = 50_000, band_rows: int =
         tangent=tangent,
         checksums=dict(cap.checksums),
     )
+
+
+def _clipped_fraction(cap: Capture, setup: BandSetup, band_rows: int) -> float:
+    """The fraction of probe pixels whose own lit value is clipped, from the codes of the probe's box band by band."""
+    if setup.box is None:
+        return 0.0
+    rows_p, cols = setup.box
+    n, step = 0, max(1, band_rows)
+    for r0 in range(rows_p.start, rows_p.stop, step):
+        rows = slice(r0, min(r0 + step, rows_p.stop))
+        n += int(np.count_nonzero(cap.images.clipped(rows, cols).any(axis=-1) & setup.probe[rows, cols]))
+    return n / max(int(setup.probe.sum()), 1)
 
 
 def _bin_bands(cap: Capture, setup: BandSetup, max_fit_samples: int, band_rows: int):
