@@ -172,22 +172,26 @@ def _heeger_bergen_binned(rng, band_q, pixel_q, probs64, shapes, iterations: int
         )
         ds.append(put(np.stack([noise[ch] for ch in chans])))
 
-    def step(g: int, **kw):
-        out = _binned.iteration(ds[g], *tables[g], shapes=shapes, mesh=mesh, **kw)
+    b = band_q.shape[1]
+    ks = [put(np.zeros((len(chans), iterations + 1, b), np.float32)) for chans in groups]
+    # One call runs every iteration; with a progress bar, one call per iteration (the last also measures).
+    spans = [(0, iterations + 1)] if progress is None else [(k, k + 1) for k in range(iterations - 1)]
+    if progress is not None:
+        spans.append((iterations - 1, iterations + 1))
+    bounds = [(jax.device_put(np.int32(lo), shared), jax.device_put(np.int32(hi), shared)) for lo, hi in spans]
+
+    def step(g: int, first, last):
+        out = _binned.run(ds[g], ks[g], first, last, *tables[g], shapes=shapes, mesh=mesh)
         return jax.block_until_ready(out)
 
-    ks = []
-    with concurrent.futures.ThreadPoolExecutor(min(len(groups), os.cpu_count() or 1)) as pool:
-        for it in range(-1, iterations + 1):
-            kw = {"start": True} if it < 0 else {"final": it == iterations}
-            out = list(pool.map(lambda g: step(g, **kw), range(len(groups))))
-            ds = [d for d, _ in out]
-            if it >= 0:
-                ks.append(np.concatenate([np.asarray(k, np.float64) for _, k in out])[:c])
-            if progress is not None and 0 <= it < iterations:
-                progress(it + 1, iterations)
+    with concurrent.futures.ThreadPoolExecutor(len(groups)) as pool:
+        for (lo, hi), (first, last) in zip(spans, bounds):
+            ds, ks = (list(x) for x in zip(*pool.map(lambda g: step(g, first, last), range(len(groups)))))
+            if progress is not None:
+                progress(min(hi, iterations), iterations)
+    ks_host = np.concatenate([np.asarray(k, np.float64) for k in ks])[:c]  # (C, iterations + 1, B)
     host = np.concatenate([np.asarray(d) for d in ds])
-    return [host[ch : ch + 1] for ch in range(c)], np.stack(ks)
+    return [host[ch : ch + 1] for ch in range(c)], ks_host.transpose(1, 0, 2)
 
 
 @texture_jit
