@@ -42,10 +42,9 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
-from ._analysis import _groups, _subband_shapes
 from ._histogram import _table_cdf
 from ._jit import texture_jit
-from ._pyramid import pyramid_collapse, pyramid_subbands
+from ._pyramid import pyramid_map
 
 BINS = 4096  # counts per row: the histogram's resolution
 LOOKUP = 16385  # points of the quantile-function table: spacing 6e-5, finer than the sin² tables' tails (1.5e-4, Q=129)
@@ -110,20 +109,22 @@ def _pixel_match(d, pixel_lookup):
 def _iterate(d, band_lookup, band_tables, pixel_lookup, masks, probs, shapes, final: bool):
     """One channel ``(1, 1, H W)`` through one iteration: the new pixels and the subbands' KS distances ``(1, B)``.
 
-    With ``final``, only the distances (``d`` is returned unchanged).
+    ``band_lookup`` ``(B, M)`` and ``band_tables`` ``(B, Q)`` are the
+    channel's tables stacked over the subbands. With ``final``, only the
+    distances (``d`` is returned unchanged). Every subband is matched as it
+    is built and goes straight back into the collapse
+    (:func:`~wardjax.texture._pyramid.pyramid_map`).
     """
+
+    def match(k, band):
+        matched, ks = _match_rows(band.reshape(1, -1), band_lookup[k][None], band_tables[k][None], probs)
+        return matched.reshape(band.shape), ks[0]
+
     spec = jnp.fft.rfft2(d.reshape(1, *shapes[0]), norm="forward")
-    groups = _groups(pyramid_subbands(spec, masks, shapes), 1)
-    matched, ks = [], []
-    for g, lookup, table in zip(groups, band_lookup, band_tables):
-        mt, k = _match_rows(g.reshape(1, -1), lookup, table, probs)
-        matched.append(mt)
-        ks.append(k)
-    ks = jnp.stack(ks, axis=-1)
+    image, ks = pyramid_map(spec, match, masks, shapes, collapse=not final)
     if final:
-        return d, ks
-    subbands = tuple(mt.reshape(1, *s) for mt, s in zip(matched, _subband_shapes(shapes)))
-    return _pixel_match(pyramid_collapse(subbands, masks, shapes).reshape(d.shape), pixel_lookup), ks
+        return d, ks[None]
+    return _pixel_match(image.reshape(d.shape), pixel_lookup), ks[None]
 
 
 def _channel_run(d, ks, first, last, band_lookup, band_tables, pixel_lookup, masks, probs, shapes):
@@ -172,8 +173,8 @@ def run(d, ks, first, last, band_lookup, band_tables, pixel_lookup, masks, probs
                 dist,
                 first,
                 last,
-                tuple(b[None] for b in bl),
-                tuple(t[None] for t in bt),
+                jnp.stack(bl),
+                jnp.stack(bt),
                 pl[None],
                 masks,
                 probs,
