@@ -194,7 +194,8 @@ def test_03_histogram_matching_is_exact(rng):
     np.testing.assert_array_equal(np.argsort(out, axis=-1, kind="stable"), np.argsort(values, axis=-1, kind="stable"))
 
 
-def test_03_order_statistics_by_histogram_are_the_sorted_values(rng):
+@pytest.mark.parametrize("n", [1 << 15, 1 << 19])
+def test_03_order_statistics_by_histogram_are_the_sorted_values(rng, n):
     """The analysis's O(n) selection (histogram, then a sort of the needed bins only) is exactly ``np.sort(v)[pick]``.
 
     Heavy tails, ties, a constant row, and outliers that put nearly every value
@@ -203,7 +204,6 @@ def test_03_order_statistics_by_histogram_are_the_sorted_values(rng):
     from wardjax.texture._analysis import _quantile_picks
     from wardjax.texture._rank import _order_statistics
 
-    n = 1 << 19  # above the size where the selection replaces the sort
     rows = {
         "laplace": rng.laplace(size=n),
         "cauchy": rng.standard_cauchy(n),
