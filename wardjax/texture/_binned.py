@@ -117,12 +117,15 @@ def _iterate(d, band_lookup, band_tables, pixel_lookup, masks, probs, shapes, fi
     """
 
     def match(k, band):
-        matched, ks = _match_rows(band.reshape(1, -1), band_lookup[k][None], band_tables[k][None], probs)
+        matched, ks = jax.vmap(_match_row, in_axes=(0, None, None, None))(
+            band.reshape(1, -1), band_lookup[k], band_tables[k], probs
+        )
+        assert ks is not None  # a table was given
         return matched.reshape(band.shape), ks[0]
 
     spec = jnp.fft.rfft2(d.reshape(1, *shapes[0]), norm="forward")
     image, ks = pyramid_map(spec, match, masks, shapes, collapse=not final)
-    if final:
+    if image is None:  # final
         return d, ks[None]
     return _pixel_match(image.reshape(d.shape), pixel_lookup), ks[None]
 

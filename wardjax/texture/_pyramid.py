@@ -247,7 +247,7 @@ def pyramid_map(spec, fn, masks: dict, shapes: tuple[tuple[int, int], ...], coll
         z = _cmul(_crop(z, shapes[level + 1]), masks["lo"][level][None])
     new, aux_low = fn(1 + ORIENTATIONS * len(masks["band"]), _idft(z, shapes[-1]))
     auxes = jax.tree_util.tree_map(lambda *a: jnp.concatenate(a), *auxes, aux_low[None])
-    if not collapse:
+    if high is None:  # not collapse
         return None, auxes
     low = jnp.fft.rfft2(new, norm="forward")
     for level in range(len(shapes) - 2, -1, -1):

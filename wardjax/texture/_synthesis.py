@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import concurrent.futures
-import os
 from collections.abc import Callable
 from typing import cast
 
@@ -144,8 +143,10 @@ def _heeger_bergen_binned(rng, band_q, pixel_q, probs64, shapes, iterations: int
     the channel axis (``NamedSharding`` over a 1-D mesh; the channels are
     independent, so no device waits for another). On one CPU device each
     channel is its own (single-threaded) program, the channels run side by
-    side on a thread pool. Returns the ``C`` channels ``(1, 1, H W)``
-    (NumPy) and the KS distances ``(iterations + 1, C, B)``.
+    side on a thread pool. Without ``progress`` one call of
+    :func:`~wardjax.texture._binned.run` does every iteration; with it, one
+    call per iteration. Returns the ``C`` channels ``(1, 1, H W)`` (NumPy)
+    and the KS distances ``(iterations + 1, C, B)``.
     """
     c, n_pix = pixel_q.shape[0], shapes[0][0] * shapes[0][1]
     noise = [rng.standard_normal((1, n_pix), dtype=np.float32) for _ in range(c)]  # the exact path's stream
@@ -178,14 +179,16 @@ def _heeger_bergen_binned(rng, band_q, pixel_q, probs64, shapes, iterations: int
     spans = [(0, iterations + 1)] if progress is None else [(k, k + 1) for k in range(iterations - 1)]
     if progress is not None:
         spans.append((iterations - 1, iterations + 1))
-    bounds = [(jax.device_put(np.int32(lo), shared), jax.device_put(np.int32(hi), shared)) for lo, hi in spans]
 
     def step(g: int, first, last):
         out = _binned.run(ds[g], ks[g], first, last, *tables[g], shapes=shapes, mesh=mesh)
         return jax.block_until_ready(out)
 
+    # A thread per channel group: three channels on two cores keep both busy (the OS shares them out);
+    # a pool of two would leave one idle while the third channel runs alone.
     with concurrent.futures.ThreadPoolExecutor(len(groups)) as pool:
-        for (lo, hi), (first, last) in zip(spans, bounds):
+        for lo, hi in spans:
+            first, last = (jax.device_put(np.int32(v), shared) for v in (lo, hi))
             ds, ks = (list(x) for x in zip(*pool.map(lambda g: step(g, first, last), range(len(groups)))))
             if progress is not None:
                 progress(min(hi, iterations), iterations)
