@@ -17,7 +17,8 @@ sort. Here, per row ``x`` of ``n`` values:
    ``s = K (x − min x) / (max x − min x)`` and ``j = ⌊s⌋``.
 
 Every step over the values is one pass (min and max, the scatter-add of the
-counts, one fused pass with two gathers from a table of ``K + 1`` entries):
+counts, one fused pass with one gather from a table of ``K`` pairs
+``(T_j, T_{j+1} − T_j)``):
 O(n + K), against O(n log n) for the sort of
 :func:`~wardjax.texture.match_histogram`; the tables cost O(K + M). Values keep
 their order (``T`` is nondecreasing), and within a bin the output is the
@@ -159,7 +160,7 @@ def run(d, ks, first, last, band_lookup, band_tables, pixel_lookup, masks, probs
     ``first = 0`` the pixels of ``d`` (the noise) are matched first.
     ``first`` and ``last`` are traced, so one compiled program runs all the
     iterations in one call (its buffers allocated once: a call per iteration
-    spends a third of its time faulting in fresh pages for them) or a few at
+    spent a quarter of its CPU time faulting in fresh pages for them) or a few at
     a time (to report progress). Returns the new ``d`` and ``ks``.
 
     The channels go one at a time through the same program body
