@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import concurrent.futures
+import os
 from collections.abc import Callable
 from typing import cast
 
@@ -184,9 +185,9 @@ def _heeger_bergen_binned(rng, band_q, pixel_q, probs64, shapes, iterations: int
         out = _binned.run(ds[g], ks[g], first, last, *tables[g], shapes=shapes, mesh=mesh)
         return jax.block_until_ready(out)
 
-    # A thread per channel group: three channels on two cores keep both busy (the OS shares them out);
-    # a pool of two would leave one idle while the third channel runs alone.
-    with concurrent.futures.ThreadPoolExecutor(len(groups)) as pool:
+    # Up to two threads a core: three channels on two cores keep both busy (the OS shares them out),
+    # where a pool of two would leave one idle while the third channel runs alone.
+    with concurrent.futures.ThreadPoolExecutor(min(len(groups), 2 * (os.cpu_count() or 1))) as pool:
         for lo, hi in spans:
             first, last = (jax.device_put(np.int32(v), shared) for v in (lo, hi))
             ds, ks = (list(x) for x in zip(*pool.map(lambda g: step(g, first, last), range(len(groups)))))
