@@ -98,6 +98,34 @@ def test_01_pyramid_agrees_with_pyrtools(rng):
     assert rel(ours["level0_orient1"] * shapes[0][0] * shapes[0][1] / full, ref.pyr_coeffs[(0, 3)]) > 0.5
 
 
+@pytest.mark.parametrize("shape", [(64, 48), (33, 35)])
+def test_01_pyramid_map_is_build_map_collapse(rng, shape):
+    """The streaming pyramid_map (bands matched as built, summed back per level) equals build, map, then collapse."""
+    import jax.numpy as jnp
+
+    from wardjax.texture._pyramid import pyramid_collapse, pyramid_map, pyramid_subbands
+
+    shapes = pyramid_shapes(shape, 2)
+    masks = jax.tree_util.tree_map(jnp.asarray, pyramid_masks(shape, 2))
+    x = rng.standard_normal((1, *shape))
+    with jax.enable_x64(True):
+        spec = jnp.fft.rfft2(jnp.asarray(x), norm="forward")
+        bands = pyramid_subbands(spec, masks, shapes)
+        gain = jnp.arange(1.0, len(bands) + 1.0)  # a different nonlinear map per subband, indexed by k
+
+        def fn(k, band):
+            return jnp.tanh(3.0 * gain[k] * band), jnp.max(jnp.abs(band))
+
+        image, aux = jax.jit(lambda s: pyramid_map(s, fn, masks, shapes))(spec)
+        want = pyramid_collapse(tuple(fn(k, b)[0] for k, b in enumerate(bands)), masks, shapes)
+        assert float(jnp.max(jnp.abs(want - pyramid_collapse(bands, masks, shapes)))) > 0.01  # the map does something
+        np.testing.assert_allclose(np.asarray(image), np.asarray(want), rtol=0, atol=1e-12)
+        np.testing.assert_allclose(np.asarray(aux), [float(jnp.max(jnp.abs(b))) for b in bands], rtol=1e-14)
+        none, aux_only = pyramid_map(spec, fn, masks, shapes, collapse=False)
+        assert none is None
+        np.testing.assert_array_equal(np.asarray(aux_only), np.asarray(aux))
+
+
 def test_01_pyramid_orientation_selectivity():
     """A vertical grating (varying along x) lands in orientation 0, a horizontal one in orientation 2."""
     y, x = np.mgrid[0:64, 0:64]
@@ -164,6 +192,29 @@ def test_03_histogram_matching_is_exact(rng):
     np.testing.assert_allclose(np.sort(out, axis=-1), expected, rtol=4 * EPS32, atol=4 * EPS32 * table.max())
     # And the matching keeps the rank order of the input.
     np.testing.assert_array_equal(np.argsort(out, axis=-1, kind="stable"), np.argsort(values, axis=-1, kind="stable"))
+
+
+@pytest.mark.parametrize("n", [1 << 15, 1 << 19])
+def test_03_order_statistics_by_histogram_are_the_sorted_values(rng, n):
+    """The analysis's O(n) selection (histogram, then a sort of the needed bins only) is exactly ``np.sort(v)[pick]``.
+
+    Heavy tails, ties, a constant row, and outliers that put nearly every value
+    in one bin (the fallback to a full sort).
+    """
+    from wardjax.texture._analysis import _quantile_picks
+    from wardjax.texture._rank import _order_statistics
+
+    rows = {
+        "laplace": rng.laplace(size=n),
+        "cauchy": rng.standard_cauchy(n),
+        "ties": rng.integers(0, 7, n),
+        "constant": np.full(n, 0.25),
+        "outliers": np.concatenate([rng.standard_normal(n - 2), [1e30, -1e30]]),
+    }
+    picks = _quantile_picks(n, quantile_probabilities(129))[0]
+    for name, v in rows.items():
+        v = v.astype(np.float32)
+        np.testing.assert_array_equal(_order_statistics(v, picks), np.sort(v)[picks], err_msg=name)
 
 
 def test_03_rank_keys_agree_between_numpy_and_xla(rng):

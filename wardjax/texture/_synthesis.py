@@ -144,8 +144,10 @@ def _heeger_bergen_binned(rng, band_q, pixel_q, probs64, shapes, iterations: int
     the channel axis (``NamedSharding`` over a 1-D mesh; the channels are
     independent, so no device waits for another). On one CPU device each
     channel is its own (single-threaded) program, the channels run side by
-    side on a thread pool. Returns the ``C`` channels ``(1, 1, H W)``
-    (NumPy) and the KS distances ``(iterations + 1, C, B)``.
+    side on a thread pool. Without ``progress`` one call of
+    :func:`~wardjax.texture._binned.run` does every iteration; with it, one
+    call per iteration. Returns the ``C`` channels ``(1, 1, H W)`` (NumPy)
+    and the KS distances ``(iterations + 1, C, B)``.
     """
     c, n_pix = pixel_q.shape[0], shapes[0][0] * shapes[0][1]
     noise = [rng.standard_normal((1, n_pix), dtype=np.float32) for _ in range(c)]  # the exact path's stream
@@ -172,22 +174,28 @@ def _heeger_bergen_binned(rng, band_q, pixel_q, probs64, shapes, iterations: int
         )
         ds.append(put(np.stack([noise[ch] for ch in chans])))
 
-    def step(g: int, **kw):
-        out = _binned.iteration(ds[g], *tables[g], shapes=shapes, mesh=mesh, **kw)
+    b = band_q.shape[1]
+    ks = [put(np.zeros((len(chans), iterations + 1, b), np.float32)) for chans in groups]
+    # One call runs every iteration; with a progress bar, one call per iteration (the last also measures).
+    spans = [(0, iterations + 1)] if progress is None else [(k, k + 1) for k in range(iterations - 1)]
+    if progress is not None:
+        spans.append((iterations - 1, iterations + 1))
+
+    def step(g: int, first, last):
+        out = _binned.run(ds[g], ks[g], first, last, *tables[g], shapes=shapes, mesh=mesh)
         return jax.block_until_ready(out)
 
-    ks = []
-    with concurrent.futures.ThreadPoolExecutor(min(len(groups), os.cpu_count() or 1)) as pool:
-        for it in range(-1, iterations + 1):
-            kw = {"start": True} if it < 0 else {"final": it == iterations}
-            out = list(pool.map(lambda g: step(g, **kw), range(len(groups))))
-            ds = [d for d, _ in out]
-            if it >= 0:
-                ks.append(np.concatenate([np.asarray(k, np.float64) for _, k in out])[:c])
-            if progress is not None and 0 <= it < iterations:
-                progress(it + 1, iterations)
+    # Up to two threads a core: three channels on two cores keep both busy (the OS shares them out),
+    # where a pool of two would leave one idle while the third channel runs alone.
+    with concurrent.futures.ThreadPoolExecutor(min(len(groups), 2 * (os.cpu_count() or 1))) as pool:
+        for lo, hi in spans:
+            first, last = (jax.device_put(np.int32(v), shared) for v in (lo, hi))
+            ds, ks = (list(x) for x in zip(*pool.map(lambda g: step(g, first, last), range(len(groups)))))
+            if progress is not None:
+                progress(min(hi, iterations), iterations)
+    ks_host = np.concatenate([np.asarray(k, np.float64) for k in ks])[:c]  # (C, iterations + 1, B)
     host = np.concatenate([np.asarray(d) for d in ds])
-    return [host[ch : ch + 1] for ch in range(c)], np.stack(ks)
+    return [host[ch : ch + 1] for ch in range(c)], ks_host.transpose(1, 0, 2)
 
 
 @texture_jit
