@@ -71,6 +71,7 @@ from ._library import library
 from ._report import Candidate, DiscoveryReport, FitState, Step
 from ._solve import _cov_full, _fit_batch, _Layout, _residual_view
 from ._structure import _binned_test
+from ._texture_term import CrossTexture, with_texture
 
 __all__ = ["discover"]
 
@@ -135,6 +136,7 @@ class _Search:
         self.base = model.base_params(data)
         self.layout = _Layout(self.base, testable)
         self.n_obs = int(data.n_obs)
+        self.cross: CrossTexture | None = None  # set when the texture is carried (design effects)
         self.solo = self.n_obs >= _SOLO_MIN_OBS
         with jax.enable_x64(True):  # on the device once, not once per solve
             self.data_dev = jax.tree_util.tree_map(jnp.asarray, data)
@@ -375,6 +377,18 @@ def _continue_contenders(search: _Search, cur: FitState, remaining: list[int], f
             refined.add(i)
 
 
+def _deflated(search: _Search, cur: _View, cand: Candidate, state: FitState) -> Candidate:
+    """``cand`` with Δχ² divided by its design effect in ΔBIC and the p-value (:class:`CrossTexture`)."""
+    import dataclasses
+
+    assert search.cross is not None
+    new = search.residual_view(state)
+    deff = search.cross.design_effect(np.asarray(cur.r), np.asarray(new.r), np.asarray(new.pred))
+    e = next(t for t in search.testable if t.name == cand.effect)
+    dchi2 = cand.delta_chi2 / deff
+    return dataclasses.replace(cand, delta_bic=dchi2 - e.k * search.ln_n, p_value=_lr_p(dchi2, e), design_effect=deff)
+
+
 def _rank_candidates(search: _Search, cur: _View, remaining: list[int]):
     """Fit every remaining effect on top of ``cur`` and rank the candidates by ΔBIC, best first.
 
@@ -401,8 +415,12 @@ def _rank_candidates(search: _Search, cur: _View, remaining: list[int]):
     fits = {i: [r for r, o in zip(res, owner) if o == i and np.isfinite(r[1])] for i in remaining}
     scored = {i: score(i, fits[i]) for i in remaining}
     _continue_contenders(search, cur.state, remaining, fits, scored, score)
-    cands = [scored[i][0] for i in remaining]
     by_effect = {i: st for i in remaining if scored[i][1] is not None and (st := scored[i][0].state) is not None}
+    if search.cross is not None:  # the texture between scanlines and channels inflates coherent evidence
+        for i in by_effect:
+            if scored[i][0].delta_bic > 0:
+                scored[i] = (_deflated(search, cur, scored[i][0], by_effect[i]), scored[i][1])
+    cands = [scored[i][0] for i in remaining]
     cands.sort(key=lambda c: -c.delta_bic)
     return cands, by_effect
 
@@ -540,38 +558,6 @@ class _Steps:
         return False
 
 
-def _with_texture(data, cur: _View):
-    """``data`` with the texture carried as a Gaussian process, and a summary; ``None`` if none is found.
-
-    The white noise is re-estimated jointly with the texture from the
-    baseline's residuals (the lag-1 estimate counted texture as noise).
-    """
-    import dataclasses
-
-    from ._texture import estimate_texture, texture_whitening
-
-    if getattr(data, "kind", None) not in ("ratio", "brdf") or data.y.shape[1] < 8:
-        return None
-    pred = cur.pred
-    y, m = np.asarray(data.y), np.asarray(data.mask)
-    exact = m if data.censored is None else m & ~np.asarray(data.censored)
-    # measured off the highlight only (prediction within 15 % of the scanline's diffuse floor), so that a
-    # lobe-shaped misfit of the baseline is not taken for texture
-    floor = np.nanquantile(np.where(m, pred, np.nan), 0.1, axis=1, keepdims=True)
-    fit = estimate_texture(y - pred, pred, exact, off=pred <= 1.15 * floor)
-    if not fit.significant().any():
-        return None
-    sigma = np.where(m, fit.sigma(pred), 1.0)
-    W = texture_whitening(fit, sigma, exact)
-    new = dataclasses.replace(data, sigma=sigma, whiten=W)
-    mean_level = np.array([np.mean(pred[..., c][m[..., c]]) for c in range(y.shape[-1])])
-    summary = {
-        "amplitude": [float(v) for v in np.sqrt(fit.T) / np.maximum(mean_level, 1e-30)],
-        "rho": [float(v) for v in fit.rho],
-    }
-    return new, summary
-
-
 def discover(
     model,
     data,
@@ -650,10 +636,11 @@ def discover(
     cur = search.residual_view(_fit_baseline(search))
     tex = None
     if texture and model.kind == "scanline":
-        textured = _with_texture(data, cur)
+        textured = with_texture(data, cur.pred)
         if textured is not None:
-            data, tex = textured
+            data, tex, cross = textured
             search = _Search(model, data, testable, lm_steps, chunk)
+            search.cross = cross
             cur = search.residual_view(_fit_baseline(search))
     sample = None
     if keep_plot_data:

@@ -80,7 +80,8 @@ class ScanlineData(eqx.Module):
         censored likelihood; without the flags it finds clipped values as a
         plateau of tied maxima.
     whiten
-        ``(S, C, N, N)`` or ``None``: lower-triangular ``L⁻¹`` that whitens the
+        ``(S, C, N, N)``, ``(S, C N, C N)`` (the channels of a scanline
+        together) or ``None``: lower-triangular ``L⁻¹`` that whitens the
         residuals along each scanline when the probe's ρd texture is carried
         in the model as a Gaussian process (:mod:`wardjax.effects._texture`);
         ``None``: white noise.
@@ -335,8 +336,35 @@ def _switch(active, e, hook: str):
 
 
 def _whiten(W, z):
-    """``L⁻¹ z`` along each scanline and channel: ``W`` ``(S, C, N, N)``, ``z`` ``(S, N, C)``."""
+    """``L⁻¹ z`` along each scanline: ``z`` ``(S, N, C)``; ``W`` ``(S, C, N, N)`` per channel or ``(S, C N, C N)``
+    with the channels of a scanline together (values ordered channel by channel)."""
+    if W.ndim == 3:
+        s_n, n, c_n = z.shape
+        zj = jnp.swapaxes(z, 1, 2).reshape(s_n, c_n * n)
+        return jnp.swapaxes(jnp.einsum("sij,sj->si", W, zj).reshape(s_n, c_n, n), 1, 2)
     return jnp.einsum("scij,sjc->sic", W, z)
+
+
+def _gls_rho(W, inv_sp, resid):
+    """ρd per scanline and channel ``(S, 1, C)`` by generalised least squares under the whitening ``W``.
+
+    ``ρd_c/π`` is a constant added to channel ``c`` of each scanline: its
+    whitened design column is ``L⁻¹`` of ``1/σ`` on that channel. Whitened
+    per channel the normal equations are one division per channel; with the
+    channels together (``W`` ``(S, C N, C N)``) they are a ``C × C`` solve per
+    scanline.
+    """
+    if W.ndim == 3:
+        c_n = inv_sp.shape[-1]
+        eye = jnp.eye(c_n, dtype=inv_sp.dtype)
+        A = jnp.stack([_whiten(W, inv_sp * eye[c][None, None, :]) for c in range(c_n)], -1)  # (S, N, C, C_cols)
+        b = _whiten(W, resid)
+        AtA = jnp.einsum("snck,sncl->skl", A, A) + _TINY * eye[None]
+        Atb = jnp.einsum("snck,snc->sk", A, b)
+        return jnp.pi * jnp.linalg.solve(AtA, Atb[..., None])[..., 0][:, None, :]
+    a = _whiten(W, inv_sp)
+    b = _whiten(W, resid)
+    return jnp.pi * jnp.sum(a * b, axis=1, keepdims=True) / jnp.maximum(jnp.sum(a * a, axis=1, keepdims=True), _TINY)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -459,13 +487,7 @@ class ScanlineModel:
             sw = jnp.sum(w, axis=1, keepdims=True)
             rho = jnp.pi * jnp.sum(w * (yp - term), axis=1, keepdims=True) / jnp.maximum(sw, _TINY)
         else:  # generalised least squares under the texture's covariance
-            a = _whiten(data.whiten, jnp.where(use, 1.0 / sp, 0.0))
-            b = _whiten(data.whiten, jnp.where(use, (yp - term) / sp, 0.0))
-            rho = (
-                jnp.pi
-                * jnp.sum(a * b, axis=1, keepdims=True)
-                / jnp.maximum(jnp.sum(a * a, axis=1, keepdims=True), _TINY)
-            )
+            rho = _gls_rho(data.whiten, jnp.where(use, 1.0 / sp, 0.0), jnp.where(use, (yp - term) / sp, 0.0))
         f = rho / jnp.pi + term
         # the deviance is exact, in the measured space: ρd above is the closed-form profile
         # of the linearised problem (close to, never better than, the exact optimum), so a

@@ -61,6 +61,10 @@ class Candidate:
     gap_p_after
         ``P(χ²_dof ≥ χ²)`` of the model with the effect: small when a
         significant gap remains (a partial match if it also explains little).
+    design_effect
+        ``D ≥ 1`` that divided Δχ² in ΔBIC and the p-value: the texture
+        between scanlines and channels (1 without the texture term; see
+        :func:`wardjax.effects._texture.design_effect`).
     converged
         Its fit converged. ``False`` when Levenberg–Marquardt stopped at its
         step cap: Δχ² and ΔBIC are then lower bounds. ``discover`` continues
@@ -77,6 +81,7 @@ class Candidate:
     physical: bool
     state: FitState | None = None
     gap_p_after: float = math.nan
+    design_effect: float = 1.0
 
     @property
     def converged(self) -> bool:
@@ -95,6 +100,7 @@ class Candidate:
                 "structure_p",
                 "physical",
                 "gap_p_after",
+                "design_effect",
                 "converged",
             )
         }

@@ -14,14 +14,27 @@ Why this form (measured, see docs/missing-effects.md)
       lamp positions per point, which one capture does not have.
 
     Here the texture is a zero-mean Gaussian process along each scanline,
-    ``Cov(t_i, t_j) = T_c ρ^{|i−j|}`` per channel (an exponential /
-    Ornstein–Uhlenbeck autocovariance in sample index), added to the white
-    noise. Marginalising it, the likelihood is ``N(f, D + T R_ρ)``, and the
-    residuals ``r = L⁻¹ (y − f)/σ`` with ``L Lᵀ = I + D⁻¹ T R_ρ D⁻¹`` are
-    white again. A specular misfit is *not* absorbed: the GP is stationary and
-    fixed before any effect is tried, so a residual that follows the lobe, an
-    image position or ``log f`` coherently over all scanlines still costs χ²
-    — it is only discounted by the texture's own variance, not fitted.
+    added to the white noise. Marginalising it, the likelihood is
+    ``N(f, D + X)``, and the residuals ``r = L⁻¹ (y − f)/σ`` with
+    ``L Lᵀ = I + D⁻¹ X D⁻¹`` are white again. A specular misfit is *not*
+    absorbed: the process is stationary and fixed before any effect is
+    tried, so a residual that follows the lobe, an image position or
+    ``log f`` coherently over all scanlines still costs χ² — it is only
+    discounted by the texture's own covariance, not fitted.
+
+    ``X`` is measured, not a parametric form (:func:`joint_autocovariance`):
+    the products of the baseline's residuals off the highlight at every lag
+    along the scanline and between every pair of channels. Two things the
+    first form, ``T_c ρ^{|i−j|}`` per channel (below), got wrong on the
+    textured bench: wood grain is smooth along a scanline, and an
+    exponential (a rough process) explained a highlight-sized bump as
+    texture at small cost (the ramp on wood was missed); and the texture is
+    one pattern in all three channels, so per-channel whitening counted the
+    same texture three times as independent evidence. What one scanline's
+    process cannot hold — the texture shared by neighbouring scanlines
+    (image columns: marble's veins run across several) — enters each
+    candidate's evidence as a design effect (:func:`design_effect`), which
+    is what stopped marble's veins being named an illumination gradient.
 
 Estimating ``T`` and ``ρ`` from one capture
     From the residuals ``e = y − f̂`` of the baseline fit, second differences
@@ -60,18 +73,39 @@ from __future__ import annotations
 import numpy as np
 from scipy.optimize import nnls
 
-__all__ = ["TextureFit", "estimate_texture", "texture_whitening"]
+__all__ = [
+    "TextureFit",
+    "cross_covariance",
+    "design_effect",
+    "estimate_texture",
+    "joint_autocovariance",
+    "texture_whitening",
+]
 
 _F_MIN = 30.0
 _LAGS = (1, 2, 3, 4, 6, 8, 12, 16)
+_CROSS_LAGS = (8, 8)  # scanline and sample lags of the empirical cross-covariance (the design effect)
 _RHO_GRID = np.concatenate([np.linspace(0.0, 0.9, 19), [0.92, 0.94, 0.96, 0.97, 0.98, 0.985, 0.99, 0.995]])
 
 
 class TextureFit:
-    """Noise and texture estimate per channel: ``s`` (3,) noise coefficients, ``T`` texture variance, ``rho``."""
+    """Noise and texture estimate per channel: ``s`` (3,) noise coefficients, ``T`` texture variance, ``rho``.
 
-    def __init__(self, s: np.ndarray, T: np.ndarray, rho: np.ndarray, scale: np.ndarray, sse_gain: np.ndarray):
-        self.s, self.T, self.rho, self.scale, self.sse_gain = s, T, rho, scale, sse_gain
+    ``acov`` ``(C N, C N)``, when set, is the texture's measured covariance
+    along a scanline and between channels (:func:`joint_autocovariance`), used
+    by :func:`texture_whitening` instead of the exponential ``T ρ^k``.
+    """
+
+    def __init__(
+        self,
+        s: np.ndarray,
+        T: np.ndarray,
+        rho: np.ndarray,
+        scale: np.ndarray,
+        sse_gain: np.ndarray,
+        acov: np.ndarray | None = None,
+    ):
+        self.s, self.T, self.rho, self.scale, self.sse_gain, self.acov = s, T, rho, scale, sse_gain, acov
 
     def sigma(self, level: np.ndarray) -> np.ndarray:
         """White-noise SD at predicted level ``(S, N, C)``."""
@@ -168,12 +202,20 @@ def estimate_texture(e: np.ndarray, level: np.ndarray, ok: np.ndarray, off: np.n
 
 
 def texture_whitening(fit: TextureFit, sigma: np.ndarray, use: np.ndarray) -> np.ndarray:
-    """``(S, C, N, N)`` lower-triangular ``L⁻¹`` with ``L Lᵀ = I + D⁻¹ T R_ρ D⁻¹`` per scanline and channel.
+    """Lower-triangular ``L⁻¹`` with ``L Lᵀ = I + D⁻¹ T R_ρ D⁻¹`` per scanline and channel, ``(S, C, N, N)``.
+
+    With ``fit.acov`` (:func:`joint_autocovariance`) the channels of a
+    scanline are whitened together, ``L Lᵀ = I + D⁻¹ X D⁻¹``, ``(S, C N, C N)``
+    (values ordered channel by channel).
 
     Values not in ``use`` (masked, or flagged clipped) are decoupled: their
     rows and columns are those of the identity.
     """
     s_n, n, c_n = sigma.shape
+    if fit.acov is not None:  # the measured covariance, all channels of a scanline together (units of f²)
+        a = np.where(use, 1.0 / sigma, 0.0).transpose(0, 2, 1).reshape(s_n, c_n * n)
+        K = np.eye(c_n * n)[None] + a[:, :, None] * fit.acov[None] * a[:, None, :]
+        return np.linalg.inv(np.linalg.cholesky(K))
     idx = np.arange(n)
     out = np.empty((s_n, c_n, n, n))
     for c in range(c_n):
@@ -183,3 +225,134 @@ def texture_whitening(fit: TextureFit, sigma: np.ndarray, use: np.ndarray) -> np
         L = np.linalg.cholesky(K)
         out[:, c] = np.linalg.inv(L)
     return out
+
+
+def _centred(e: np.ndarray, off: np.ndarray) -> np.ndarray:
+    """Residuals off the highlight about their scanline's mean (NaN elsewhere): what ρd per scanline leaves."""
+    eo = np.where(off, e, np.nan)
+    n = np.sum(np.isfinite(eo), axis=1, keepdims=True)
+    return eo - np.nansum(eo, axis=1, keepdims=True) / np.maximum(n, 1)
+
+
+def _lag_product(a: np.ndarray, b: np.ndarray, k: int, m: int) -> np.ndarray:
+    """``a[s, i] · b[s + k, i + m]`` over the overlap (``k ≥ 0``; ``m`` of either sign), flattened."""
+    s_n, n = a.shape
+    lo, hi = max(0, -m), n - max(0, m)
+    return (a[: s_n - k, lo:hi] * b[k:, lo + m : hi + m]).ravel()
+
+
+def joint_autocovariance(e: np.ndarray, off: np.ndarray, noise_var: np.ndarray) -> np.ndarray:
+    """The texture's covariance along one scanline, between all channels, ``(C N, C N)``, measured off the highlight.
+
+    Entry ``(c N + i, c' N + j)`` is ``c_{cc'}(j − i) = ⟨ē_{i,c} ē_{j,c'}⟩``,
+    the product of residuals about each scanline's mean (white noise adds
+    nothing off the diagonal), the diagonal ``c = c', i = j`` less the white
+    noise ``noise_var`` (at least ``c_cc(1)``), every lag tapered by a Hann
+    window of half the scanline, the whole made positive semi-definite
+    (negative eigenvalues set to 0). Removing each scanline's mean biases
+    every entry by about the same constant per channel pair; a constant added
+    to a channel's covariance does not change the fit, since ρd per scanline
+    and channel is a free constant (generalised least squares with an
+    intercept).
+
+    Two properties of a real ρd texture that ``T ρ^k`` per channel misses:
+    its shape along the scanline (wood grain is smooth, so a sharp,
+    highlight-sized bump is *not* cheap to explain as texture, whereas the
+    exponential — a rough, Markov process — explains it at small cost), and
+    that it is one pattern in every channel, in the diffuse colour (the
+    dichromatic model, Shafer 1985): the specular lobe is white, so the
+    channel combinations across the diffuse colour see the lobe without the
+    texture, and the generalised least squares weights them accordingly.
+    """
+    s_n, n, c_n = e.shape
+    eo = _centred(e, off)
+    half = max(n // 2, 2)
+    lag = np.arange(n)[None, :] - np.arange(n)[:, None]  # j − i
+    taper = np.where(np.abs(lag) < half, 0.5 * (1.0 + np.cos(np.pi * lag / half)), 0.0)
+    X = np.zeros((c_n * n, c_n * n))
+    for c in range(c_n):
+        for c2 in range(c_n):
+            ac = np.zeros(2 * half + 1)
+            for m in range(-half, half + 1):
+                p = _lag_product(eo[..., c], eo[..., c2], 0, m)
+                p = p[np.isfinite(p)]
+                ac[half + m] = float(np.mean(p)) if p.size > 4 * n else 0.0
+            if c == c2:
+                ac[half] = max(ac[half] - float(noise_var[c]), ac[half + 1], 0.0)
+            X[c * n : (c + 1) * n, c2 * n : (c2 + 1) * n] = ac[np.clip(lag, -half, half) + half] * taper
+    X = 0.5 * (X + X.T)
+    ev, V = np.linalg.eigh(X)
+    return (V * np.maximum(ev, 0.0)) @ V.T
+
+
+def cross_covariance(e: np.ndarray, off: np.ndarray, lags: tuple[int, int] = _CROSS_LAGS) -> np.ndarray:
+    """Texture covariance between scanlines and between channels ``(C, C, 2K + 1, 2M + 1)``.
+
+    ``X[c, c', K + k, M + m] = ⟨ē_{s,i,c} ē_{s+k,i+m,c'}⟩`` off the highlight,
+    about each scanline's mean, for scanline lags ``1 ≤ |k| ≤ K`` and sample
+    lags ``|m| ≤ M``; ``k = 0`` (within a scanline, which the whitening
+    models) is zero. Neighbouring scanlines are neighbouring image columns:
+    this is what the per-scanline Gaussian process leaves out.
+    """
+    K, M = lags
+    s_n, n, c_n = e.shape
+    eo = _centred(e, off)
+    out = np.zeros((c_n, c_n, 2 * K + 1, 2 * M + 1))
+    for c in range(c_n):
+        for c2 in range(c_n):
+            for k in range(-K, K + 1):
+                if k == 0:  # within a scanline: modelled by the whitening
+                    continue
+                for m in range(-M, M + 1):
+                    # lag (k, m) from c to c2 is lag (−k, −m) from c2 to c
+                    p = (
+                        _lag_product(eo[..., c], eo[..., c2], k, m)
+                        if k >= 0
+                        else _lag_product(eo[..., c2], eo[..., c], -k, -m)
+                    )
+                    p = p[np.isfinite(p)]
+                    out[c, c2, K + k, M + m] = float(np.mean(p)) if p.size > 4 * n else 0.0
+    return out
+
+
+def design_effect(d: np.ndarray, W: np.ndarray, sigma: np.ndarray, use: np.ndarray, cross: np.ndarray) -> float:
+    """Variance inflation of a whitened direction ``d`` ``(S, N, C)`` by the texture the whitening leaves out.
+
+    Along ``d`` (the change a candidate effect makes to the whitened
+    residuals) the evidence is ``Δχ² ≈ (dᵀr)²/dᵀd``; under the working model
+    ``Var(dᵀr) = dᵀd``. With the covariance ``X`` between scanlines and
+    channels (:func:`cross_covariance`) it is ``dᵀd + Σ X(k, m) u_{s,i,c}
+    u_{s+k,i+m,c'}`` with ``u = Wᵀd / σ`` (back in units of f), so the
+    evidence is divided by::
+
+        D = max(1, 1 + Σ X(k, m) u u' / dᵀd)
+
+    (a first-order Rao–Scott correction; never below 1, so it only ever
+    withholds evidence). This is what keeps marble's veins, coherent over
+    several image columns, from being read as a trend across scanlines.
+    """
+    K, M = (cross.shape[2] - 1) // 2, (cross.shape[3] - 1) // 2
+    dd = float(np.sum(d * d))
+    if dd <= 0:
+        return 1.0
+    if W.ndim == 3:  # channels whitened together
+        s_n, n, c_n = d.shape
+        dj = d.transpose(0, 2, 1).reshape(s_n, c_n * n)
+        v = np.einsum("sij,si->sj", W, dj).reshape(s_n, c_n, n).transpose(0, 2, 1)
+    else:
+        v = np.einsum("scij,sic->sjc", W, d)  # Wᵀ d per scanline and channel
+    u = np.where(use, v / sigma, 0.0)
+    c_n = u.shape[-1]
+    extra = 0.0
+    for c in range(c_n):
+        for c2 in range(c_n):
+            for k in range(-K, K + 1):
+                for m in range(-M, M + 1):
+                    x = cross[c, c2, K + k, M + m]
+                    if x == 0.0:
+                        continue
+                    if k >= 0:
+                        extra += x * float(np.sum(_lag_product(u[..., c], u[..., c2], k, m)))
+                    else:
+                        extra += x * float(np.sum(_lag_product(u[..., c2], u[..., c], -k, -m)))
+    return max(1.0, 1.0 + extra / dd)
