@@ -34,7 +34,8 @@ def test_joint_covariance_whitens_a_texture_shared_by_the_channels():
     e = t[..., None] * colour + noise * rng.standard_normal((s, n, 3))
     e -= e.mean(1, keepdims=True)  # what one ρd per scanline and channel leaves
     ok = np.ones(e.shape, bool)
-    X = joint_autocovariance(e, ok, np.full(3, noise**2))
+    X, used = joint_autocovariance(e, ok, np.full(3, noise**2))
+    assert np.allclose(used, noise**2)  # the given noise is below the lag-0 to lag-1 drop: kept
     # the measured cross-channel covariance at lag 0 is the colour's outer product times the texture variance
     lag0 = np.array([[X[c * n + 5, c2 * n + 5] for c2 in range(3)] for c in range(3)])
     corr = lag0 / np.sqrt(np.outer(np.diag(lag0), np.diag(lag0)))

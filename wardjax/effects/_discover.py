@@ -83,8 +83,13 @@ _REFINE_ROUNDS = 11
 _NOISE_Z = 2.0  # stop rule: no effect is added once χ² − dof ≤ _NOISE_Z · √(2 dof)
 _AMBIGUOUS_BIC = 6.0  # a confusable runner-up within this ΔBIC of the winner is named too (Kass & Raftery: < 6)
 # effects whose signatures one capture may not tell apart: a lamp field follows image position, anisotropy the
-# half-vector azimuth, and across one capture's scanlines the two covary
-_CONFUSABLE = {"illumination_gradient": ("anisotropy",), "anisotropy": ("illumination_gradient",)}
+# half-vector azimuth, the Fresnel rise the incidence angle, and across one capture's scanlines they covary (on
+# textured captures the Fresnel rise, one parameter, took the ramp across the image)
+_CONFUSABLE = {
+    "illumination_gradient": ("anisotropy", "fresnel"),
+    "anisotropy": ("illumination_gradient",),
+    "fresnel": ("illumination_gradient",),
+}
 _REFINE_BIC = 0.5  # ... a runner-up matters if its ΔBIC (a lower bound) is at least this fraction of the winner's
 
 

@@ -122,6 +122,16 @@ class Step:
     plot: dict | None = None
 
 
+# what would tell an effect from an illumination gradient (``report.ambiguous``)
+_SEPARATE = {
+    "anisotropy": "a second capture with the probe turned by 90° would: anisotropy turns with it, the "
+    "illumination does not",
+    "fresnel": "a second capture with the lamp higher or lower would: the Fresnel rise follows the incidence "
+    "angle, the illumination the image position",
+    "illumination_gradient": "a second capture with the probe turned by 90° or the lamp moved would",
+}
+
+
 def _num(x):
     if isinstance(x, (bool, np.bool_)):
         return bool(x)
@@ -309,8 +319,8 @@ class DiscoveryReport:
         if self.ambiguous:
             L.append("\n## Not told apart\n")
             L.extend(
-                f"- {a} or {b}: ΔBIC differs by {d:.1f} only; one capture cannot tell them apart (a second "
-                "capture with the probe turned by 90° would: anisotropy turns with it, the illumination does not)"
+                f"- {a} or {b}: ΔBIC differs by {d:.1f} only; one capture cannot tell them apart "
+                f"({_SEPARATE[b if a == 'illumination_gradient' else a]})"
                 for a, b, d in self.ambiguous
             )
         L.append("\n## Unexplained structure\n")

@@ -241,19 +241,26 @@ def _lag_product(a: np.ndarray, b: np.ndarray, k: int, m: int) -> np.ndarray:
     return (a[: s_n - k, lo:hi] * b[k:, lo + m : hi + m]).ravel()
 
 
-def joint_autocovariance(e: np.ndarray, off: np.ndarray, noise_var: np.ndarray) -> np.ndarray:
+def joint_autocovariance(e: np.ndarray, off: np.ndarray, noise_var: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The texture's covariance along one scanline, between all channels, ``(C N, C N)``, measured off the highlight.
 
     Entry ``(c N + i, c' N + j)`` is ``c_{cc'}(j − i) = ⟨ē_{i,c} ē_{j,c'}⟩``,
     the product of residuals about each scanline's mean (white noise adds
     nothing off the diagonal), the diagonal ``c = c', i = j`` less the white
-    noise ``noise_var`` (at least ``c_cc(1)``), every lag tapered by a Hann
+    noise, every lag tapered by a Hann
     window of half the scanline, the whole made positive semi-definite
     (negative eigenvalues set to 0). Removing each scanline's mean biases
     every entry by about the same constant per channel pair; a constant added
     to a channel's covariance does not change the fit, since ρd per scanline
     and channel is a free constant (generalised least squares with an
     intercept).
+
+    The white noise is ``noise_var`` (from :func:`estimate_texture`) but at
+    most ``c_cc(0) − c_cc(1)``: the drop from lag 0 to lag 1 is noise plus
+    the texture's own drop, never less than the noise. Where the
+    exponential's fit puts more there (a texture smoother than an
+    exponential, e.g. a blurred frame), the excess would be counted twice,
+    as texture and as noise. Returns ``X`` and the noise used ``(C,)``.
 
     Two properties of a real ρd texture that ``T ρ^k`` per channel misses:
     its shape along the scanline (wood grain is smooth, so a sharp,
@@ -270,6 +277,7 @@ def joint_autocovariance(e: np.ndarray, off: np.ndarray, noise_var: np.ndarray) 
     lag = np.arange(n)[None, :] - np.arange(n)[:, None]  # j − i
     taper = np.where(np.abs(lag) < half, 0.5 * (1.0 + np.cos(np.pi * lag / half)), 0.0)
     X = np.zeros((c_n * n, c_n * n))
+    noise = np.array(noise_var, float)
     for c in range(c_n):
         for c2 in range(c_n):
             ac = np.zeros(2 * half + 1)
@@ -278,11 +286,65 @@ def joint_autocovariance(e: np.ndarray, off: np.ndarray, noise_var: np.ndarray) 
                 p = p[np.isfinite(p)]
                 ac[half + m] = float(np.mean(p)) if p.size > 4 * n else 0.0
             if c == c2:
-                ac[half] = max(ac[half] - float(noise_var[c]), ac[half + 1], 0.0)
+                noise[c] = min(noise[c], max(ac[half] - ac[half + 1], 0.0))
+                ac[half] = max(ac[half] - noise[c], 0.0)
             X[c * n : (c + 1) * n, c2 * n : (c2 + 1) * n] = ac[np.clip(lag, -half, half) + half] * taper
     X = 0.5 * (X + X.T)
     ev, V = np.linalg.eigh(X)
-    return (V * np.maximum(ev, 0.0)) @ V.T
+    return (V * np.maximum(ev, 0.0)) @ V.T, noise
+
+
+def level_noise(e: np.ndarray, level: np.ndarray, ok: np.ndarray, X: np.ndarray) -> np.ndarray:
+    """White-noise coefficients ``(C, 3)`` of ``σ² = s0 + s1 f + s2 f²`` (units of ``level``), texture known.
+
+    Lag-1 second differences over all values, highlight included (the
+    level dependence of shot noise is read there), with the texture's share
+    taken from its measured covariance ``X`` (:func:`joint_autocovariance`)::
+
+        E[d²]/6 = σ²(f) + (6 c(0) − 8 c(1) + 2 c(2))/6
+
+    NNLS on ``[1, f, f²]``. The exponential's fit read the level dependence
+    as texture where the texture dominates off the highlight (``s1 = s2 =
+    0`` on the noise-textured captures), so the highlight's noise was
+    underestimated (whitened mean square 1.17–1.29 there) and lobe-shaped
+    effects gained spurious evidence.
+    """
+    s_n, n, c_n = e.shape
+    out = np.zeros((c_n, 3))
+    for c in range(c_n):
+        blk = X[c * n : (c + 1) * n, c * n : (c + 1) * n]
+        cm = [float(np.mean(np.diagonal(blk, m))) for m in range(3)]
+        tex = (6.0 * cm[0] - 8.0 * cm[1] + 2.0 * cm[2]) / 6.0
+        g = np.where(ok[..., c], e[..., c], np.nan)
+        d2 = (g[:, :-2] - 2.0 * g[:, 1:-1] + g[:, 2:]) ** 2 / 6.0
+        lv = level[:, 1:-1, c]
+        m = np.isfinite(d2)
+        f = lv[m] / max(float(np.mean(np.abs(lv[m]))), 1e-30)
+        coef, _ = nnls(np.stack([np.ones_like(f), f, f * f], -1), d2[m] - tex)
+        sc = max(float(np.mean(np.abs(lv[m]))), 1e-30)
+        out[c] = coef / np.array([1.0, sc, sc * sc])
+    return out
+
+
+def off_highlight_variance(fit: TextureFit, e: np.ndarray, level: np.ndarray, off: np.ndarray) -> float:
+    """Mean square of the whitened residuals off the highlight under ``fit``: 1 when the covariance is right.
+
+    The residuals ``e`` about each scanline's mean off the highlight (the
+    highlight's values decoupled), whitened with ``fit`` at the noise of
+    ``level``; ``(n − 1)/n`` per scanline and channel is what the mean takes.
+    """
+    s_n, n, c_n = e.shape
+    eo = _centred(e, off)
+    sigma = np.where(off, fit.sigma(level), 1.0)
+    W = texture_whitening(fit, sigma, off)
+    z = np.where(off, eo, 0.0) / sigma
+    if W.ndim == 3:
+        zj = np.einsum("sij,sj->si", W, z.transpose(0, 2, 1).reshape(s_n, c_n * n))
+    else:
+        zj = np.einsum("scij,sjc->scj", W, z).reshape(s_n, -1)
+    k = off.sum(1)  # (S, C) values per scanline and channel
+    dof = float(np.sum(np.maximum(k - 1, 0)))
+    return float(np.sum(zj**2)) / max(dof, 1.0)
 
 
 def cross_covariance(e: np.ndarray, off: np.ndarray, lags: tuple[int, int] = _CROSS_LAGS) -> np.ndarray:

@@ -14,11 +14,19 @@ from typing import NamedTuple
 
 import numpy as np
 
-from ._texture import cross_covariance, design_effect, estimate_texture, joint_autocovariance, texture_whitening
+from ._texture import (
+    cross_covariance,
+    design_effect,
+    estimate_texture,
+    joint_autocovariance,
+    level_noise,
+    texture_whitening,
+)
 
 __all__ = ["CrossTexture", "with_texture"]
 
 _NOISE_FLOOR = 0.02  # white noise off the highlight at least this fraction of the texture variance
+_CALIBRATION_SCANLINES = 24  # scanlines the noise calibration whitens
 
 
 def with_texture(data, pred: np.ndarray):
@@ -46,11 +54,18 @@ def with_texture(data, pred: np.ndarray):
         return None
     c_n = y.shape[-1]
     noise_off = np.array([np.mean(fit.sigma(pred)[..., c][off[..., c]] ** 2) for c in range(c_n)])
-    fit.acov = joint_autocovariance(e, off, noise_off)
+    noise = _calibrated_noise(fit, e, pred, off, noise_off)
+    fit.acov, noise = joint_autocovariance(e, off, noise)
     n = y.shape[1]
     tex_var = np.array([fit.acov[c * n, c * n] for c in range(c_n)])
+    # the noise's level dependence with the texture known, its level off the highlight the calibrated one
+    s_lv = level_noise(e, pred, exact, fit.acov)
+    f_off = np.array([np.mean(pred[..., c][off[..., c]]) for c in range(c_n)])
+    shot = s_lv[:, 1] * f_off + s_lv[:, 2] * f_off**2
+    s_lv[:, 0] = np.maximum(noise - shot, 0.0)
     # a white-noise floor keeps the whitening well conditioned where the texture term took all the variance
-    fit.s[:, 0] += np.maximum(_NOISE_FLOOR * tex_var - noise_off, 0.0)
+    s_lv[:, 0] += np.maximum(_NOISE_FLOOR * tex_var - np.maximum(noise, shot), 0.0)
+    fit.s = s_lv * (fit.scale[:, None] ** np.arange(3)[None, :])  # TextureFit.sigma takes f / scale
     sigma = np.where(m, fit.sigma(pred), 1.0)
     W = texture_whitening(fit, sigma, exact)
     new = dataclasses.replace(data, sigma=sigma, whiten=W)
@@ -60,6 +75,40 @@ def with_texture(data, pred: np.ndarray):
         "rho": [float(fit.acov[c * n, c * n + 1] / max(tex_var[c], 1e-300)) for c in range(c_n)],
     }
     return new, summary, CrossTexture(y, off, W, sigma, exact)
+
+
+def _calibrated_noise(fit, e: np.ndarray, pred: np.ndarray, off: np.ndarray, noise_off: np.ndarray) -> np.ndarray:
+    """The white noise off the highlight ``(C,)``: the estimate scaled by ``λ ∈ [λ_min, 1]`` so that the whitened
+    residuals there have unit mean square (bisection on a subset of scanlines).
+
+    The exponential's fit (:func:`~wardjax.effects._texture.estimate_texture`)
+    reads the noise from short lags; where the residuals hold less power at
+    high frequencies than white noise of that level — a blurred frame blurs
+    its noise too — the whitened residuals came out at half their variance
+    (gap 0.47 on a blurred noise-textured capture) and any effect was cheap.
+    """
+    import copy
+
+    from ._texture import off_highlight_variance
+
+    rows = np.linspace(0, e.shape[0] - 1, min(e.shape[0], _CALIBRATION_SCANLINES)).astype(int)
+    sub = (e[rows], pred[rows], off[rows])
+
+    def msq(lam: float) -> float:
+        f = copy.copy(fit)
+        f.s = fit.s * lam
+        f.acov, _ = joint_autocovariance(sub[0], sub[2], noise_off * lam)
+        return off_highlight_variance(f, *sub)
+
+    lo, hi = _NOISE_FLOOR, 1.0
+    if msq(hi) >= 1.0:
+        return noise_off
+    if msq(lo) <= 1.0:
+        return noise_off * lo
+    for _ in range(8):  # λ to within 0.4 % of its range
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if msq(mid) > 1.0 else (lo, mid)
+    return noise_off * 0.5 * (lo + hi)
 
 
 class CrossTexture(NamedTuple):
