@@ -614,7 +614,8 @@ def texture_synthesize(model_path: Path, size: str, seed: int, iterations: int, 
     "--texture/--no-texture",
     default=False,
     show_default=True,
-    help="Carry the probe's ρd texture in the model (a Gaussian process with its measured autocovariance).",
+    help="Carry the probe's ρd texture in the model (a Gaussian process with its measured covariance along "
+    "the scanline and between channels; what neighbouring columns share discounts the evidence).",
 )
 def diagnose_cmd(capture: Path, out_dir: Path, max_steps: int, max_samples: int, texture: bool) -> None:
     """Find the effects a capture needs beyond the Ward model: report.json, report.md, residual plots."""
