@@ -421,11 +421,12 @@ def _rank_candidates(search: _Search, cur: _View, remaining: list[int]):
     scored = {i: score(i, fits[i]) for i in remaining}
     _continue_contenders(search, cur.state, remaining, fits, scored, score)
     by_effect = {i: st for i in remaining if scored[i][1] is not None and (st := scored[i][0].state) is not None}
+    evidence = {i: scored[i][0] for i in remaining}
     if search.cross is not None:  # the texture between scanlines and channels inflates coherent evidence
         for i in by_effect:
-            if scored[i][0].delta_bic > 0:
-                scored[i] = (_deflated(search, cur, scored[i][0], by_effect[i]), scored[i][1])
-    cands = [scored[i][0] for i in remaining]
+            if evidence[i].delta_bic > 0:
+                evidence[i] = _deflated(search, cur, evidence[i], by_effect[i])
+    cands = list(evidence.values())
     cands.sort(key=lambda c: -c.delta_bic)
     return cands, by_effect
 
