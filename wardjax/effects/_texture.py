@@ -241,7 +241,9 @@ def _lag_product(a: np.ndarray, b: np.ndarray, k: int, m: int) -> np.ndarray:
     return (a[: s_n - k, lo:hi] * b[k:, lo + m : hi + m]).ravel()
 
 
-def joint_autocovariance(e: np.ndarray, off: np.ndarray, noise_var: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def joint_autocovariance(
+    e: np.ndarray, off: np.ndarray, noise_var: np.ndarray, lags: np.ndarray | None = None
+) -> tuple[np.ndarray, np.ndarray]:
     """The texture's covariance along one scanline, between all channels, ``(C N, C N)``, measured off the highlight.
 
     Entry ``(c N + i, c' N + j)`` is ``c_{cc'}(j − i) = ⟨ē_{i,c} ē_{j,c'}⟩``,
@@ -260,7 +262,8 @@ def joint_autocovariance(e: np.ndarray, off: np.ndarray, noise_var: np.ndarray) 
     the texture's own drop, never less than the noise. Where the
     exponential's fit puts more there (a texture smoother than an
     exponential, e.g. a blurred frame), the excess would be counted twice,
-    as texture and as noise. Returns ``X`` and the noise used ``(C,)``.
+    as texture and as noise. Returns ``X`` and the noise used ``(C,)``. ``lags``: the
+    :func:`lag_covariances` of ``e`` if already measured (they do not depend on the noise).
 
     Two properties of a real ρd texture that ``T ρ^k`` per channel misses:
     its shape along the scanline (wood grain is smooth, so a sharp,
@@ -271,20 +274,36 @@ def joint_autocovariance(e: np.ndarray, off: np.ndarray, noise_var: np.ndarray) 
     channel combinations across the diffuse colour see the lobe without the
     texture, and the generalised least squares weights them accordingly.
     """
+    lags = lag_covariances(e, off) if lags is None else lags
+    return _assemble(lags, e.shape[1], np.array(noise_var, float))
+
+
+def lag_covariances(e: np.ndarray, off: np.ndarray) -> np.ndarray:
+    """``⟨ē_{i,c} ē_{i+m,c'}⟩`` off the highlight about each scanline's mean, ``(C, C, 2 H + 1)`` for ``|m| ≤ H``
+    (``H`` half a scanline): what :func:`joint_autocovariance` assembles, independent of the noise."""
     s_n, n, c_n = e.shape
     eo = _centred(e, off)
     half = max(n // 2, 2)
-    lag = np.arange(n)[None, :] - np.arange(n)[:, None]  # j − i
-    taper = np.where(np.abs(lag) < half, 0.5 * (1.0 + np.cos(np.pi * lag / half)), 0.0)
-    X = np.zeros((c_n * n, c_n * n))
-    noise = np.array(noise_var, float)
+    out = np.zeros((c_n, c_n, 2 * half + 1))
     for c in range(c_n):
         for c2 in range(c_n):
-            ac = np.zeros(2 * half + 1)
             for m in range(-half, half + 1):
                 p = _lag_product(eo[..., c], eo[..., c2], 0, m)
                 p = p[np.isfinite(p)]
-                ac[half + m] = float(np.mean(p)) if p.size > 4 * n else 0.0
+                out[c, c2, half + m] = float(np.mean(p)) if p.size > 4 * n else 0.0
+    return out
+
+
+def _assemble(lags: np.ndarray, n: int, noise: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``X`` ``(C N, C N)`` from :func:`lag_covariances`, less the white noise (capped), tapered, made PSD."""
+    c_n, half = lags.shape[0], (lags.shape[2] - 1) // 2
+    lag = np.arange(n)[None, :] - np.arange(n)[:, None]  # j − i
+    taper = np.where(np.abs(lag) < half, 0.5 * (1.0 + np.cos(np.pi * lag / half)), 0.0)
+    X = np.zeros((c_n * n, c_n * n))
+    noise = noise.copy()
+    for c in range(c_n):
+        for c2 in range(c_n):
+            ac = lags[c, c2].copy()
             if c == c2:
                 noise[c] = min(noise[c], max(ac[half] - ac[half + 1], 0.0))
                 ac[half] = max(ac[half] - noise[c], 0.0)

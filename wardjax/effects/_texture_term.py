@@ -19,6 +19,7 @@ from ._texture import (
     design_effect,
     estimate_texture,
     joint_autocovariance,
+    lag_covariances,
     level_noise,
     texture_whitening,
 )
@@ -93,11 +94,12 @@ def _calibrated_noise(fit, e: np.ndarray, pred: np.ndarray, off: np.ndarray, noi
 
     rows = np.linspace(0, e.shape[0] - 1, min(e.shape[0], _CALIBRATION_SCANLINES)).astype(int)
     sub = (e[rows], pred[rows], off[rows])
+    lags = lag_covariances(sub[0], sub[2])  # measured once: only the noise changes with λ
 
     def msq(lam: float) -> float:
         f = copy.copy(fit)
         f.s = fit.s * lam
-        f.acov, _ = joint_autocovariance(sub[0], sub[2], noise_off * lam)
+        f.acov, _ = joint_autocovariance(sub[0], sub[2], noise_off * lam, lags)
         return off_highlight_variance(f, *sub)
 
     lo, hi = _NOISE_FLOOR, 1.0
