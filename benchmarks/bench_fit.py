@@ -8,7 +8,10 @@ differences and once with an analytic Jacobian. SciPy runs on at most
 deviations are measured on those. "Collapsed" = α off by more than 50 %.
 wardjax's rate is the best of three runs (compile time reported apart);
 SciPy's is one long run. float32 is timed twice: on the float64 arrays (cast
-inside the kernel) and on float32 arrays, as a float32 pipeline would hold them.
+inside the kernel) and on float32 arrays, as a float32 pipeline would hold them;
+then both precisions once more on arrays already on the device (``jax.Array``).
+Above 10⁵ scanlines the batch is 10⁵ simulated scanlines repeated (simulating
+10⁶ takes minutes; each fit does the same work whatever its data).
 
 Run alone: ``python -m benchmarks.bench_fit [--sizes 100,1000,10000,100000]``.
 """
@@ -16,6 +19,7 @@ Run alone: ``python -m benchmarks.bench_fit [--sizes 100,1000,10000,100000]``.
 from __future__ import annotations
 
 import argparse
+import functools
 import time
 
 import jax
@@ -26,8 +30,17 @@ from scipy.optimize import least_squares
 import wardjax as wj
 from wardjax.simulate import x_offset_for_slope
 
+_SIMULATED = 100_000
 
+
+@functools.lru_cache(maxsize=2)
 def make_data(n: int, seed: int = 0):
+    if n > _SIMULATED:
+        truth, d = make_data(_SIMULATED, seed)
+        k = -(-n // _SIMULATED)
+        rep = lambda a: np.concatenate([a] * k)[:n]
+        fitted = {k: rep(getattr(d, k)) for k in ("f_r", "wi", "wo", "sigma")}
+        return jax.tree_util.tree_map(rep, truth), d._replace(f_true=None, points=None, **fitted)
     rng = np.random.default_rng(seed)
     a = rng.uniform(0.03, 0.3, n)
     truth = wj.WardParams(rho_d=rng.uniform(0.05, 0.8, (n, 3)), rho_s=rng.uniform(0.01, 0.1, n), alpha_x=a, alpha_y=a)
@@ -104,6 +117,15 @@ def bench_fits(sizes, scipy_max, dtypes=(np.float64, np.float32)):
         wj.fit_scanlines(*f32[:3], weights=f32[3], dtype=np.float32)
         el, _ = _best_of(REPEATS, lambda: wj.fit_scanlines(*f32[:3], weights=f32[3], dtype=np.float32))
         row["wj_f32in_rate"] = n / el
+        # Data already on the device (jax.Array, as a pipeline that builds its samples there holds
+        # them): fit_scanlines fits them where they are; no host-to-device copy inside the timing.
+        for key, dt in (("dev64", np.float64), ("dev32", np.float32)):
+            with jax.enable_x64(True):
+                on_dev = jax.block_until_ready([jax.device_put(np.asarray(a, dt)) for a in (d.f_r, d.wi, d.wo, w)])
+            wj.fit_scanlines(*on_dev[:3], weights=on_dev[3], dtype=dt)
+            el, _ = _best_of(REPEATS, lambda o=on_dev, dt=dt: wj.fit_scanlines(*o[:3], weights=o[3], dtype=dt))
+            row[f"wj_{key}_rate"] = n / el
+            del on_dev
         m = min(n, scipy_max)
         for analytic in (False, True):
             t0 = time.perf_counter()
@@ -119,15 +141,20 @@ def bench_fits(sizes, scipy_max, dtypes=(np.float64, np.float32)):
 
 
 def report(rows):
-    print("f32: float64 data fitted in float32; f32 data: float32 arrays passed in (cast untimed).")
+    print(
+        "f32: float64 data fitted in float32; f32 data: float32 arrays passed in (cast untimed); "
+        "dev64/dev32: float64/float32 data already on the device (jax.Array)."
+    )
     print(
         f"{'N':>7} | {'wardjax f64 fits/s':>18} {'compile s':>9} | {'f32 fits/s':>10} {'f32 data':>9} | "
+        f"{'dev64':>10} {'dev32':>10} | "
         f"{'SciPy FD':>9} {'SciPy jac':>9} | {'×FD':>6} {'×jac':>6} {'f32/f64':>7} {'f32 data/f64':>12}"
     )
     for r in rows:
         print(
             f"{r['N']:>7} | {r['wj_float64_rate']:>18,.0f} {r['wj_float64_compile']:>9.2f} | "
             f"{r['wj_float32_rate']:>10,.0f} {r['wj_f32in_rate']:>9,.0f} | "
+            f"{r['wj_dev64_rate']:>10,.0f} {r['wj_dev32_rate']:>10,.0f} | "
             f"{r['sp_fd_rate']:>9,.0f} {r['sp_jac_rate']:>9,.0f} | "
             f"{r['wj_float64_rate'] / r['sp_fd_rate']:>6.0f} {r['wj_float64_rate'] / r['sp_jac_rate']:>6.0f} "
             f"{r['wj_float32_rate'] / r['wj_float64_rate']:>7.2f} "

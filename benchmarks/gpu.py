@@ -1,28 +1,108 @@
 """The engine and texture benchmarks on a GPU: ``make bench-gpu`` (``python -m benchmarks.gpu``).
 
-Scanline fits per second at 10³–10⁶ scanlines (float64 and float32, beside
-SciPy on ≤ 200 scanlines), Ward evaluations per second (beside NumPy), and the
-texture analysis + synthesis at 1024² (beside pyrtools + NumPy on the host).
-Without a GPU it says so and exits 0: the test suite and CI never need one.
+Scanline fits per second at 10³–10⁶ scanlines (float64 and float32, data on
+the host and data already on the device, beside SciPy on ≤ 200 scanlines), the
+time of each stage of one chunk, fits per second at a larger chunk, Ward
+evaluations per second (beside NumPy), and the texture analysis + synthesis at
+1024² (beside pyrtools + NumPy on the host). Without a GPU it says so and exits
+0: the test suite and CI never need one (``--cpu`` runs it anyway, to check the
+script with small ``--sizes``).
 """
 
 from __future__ import annotations
 
+import argparse
 import sys
+import time
+
+import numpy as np
+
+
+def _best(fn, k=3):
+    import jax
+
+    best = float("inf")
+    for _ in range(k):
+        t0 = time.perf_counter()
+        jax.block_until_ready(fn())
+        best = min(best, time.perf_counter() - t0)
+    return best
+
+
+def stages(n: int) -> None:
+    """Seconds of each compiled stage of the fast fit on one chunk of ``n`` scanlines already on the device."""
+    import jax
+
+    from benchmarks.bench_fit import make_data
+    from wardjax.fit import _data, _scanline
+
+    _, d = make_data(n, seed=n)
+    print(f"\nstages of one chunk of {n:,} scanlines × 256 samples, data on the device (best of 3):")
+    for dt in (np.float64, np.float32):
+        dt = np.dtype(dt)
+        rtol = 0.0 if dt == np.float64 else 64 * float(np.finfo(dt).eps)
+        with jax.enable_x64(True):
+            f, wi, wo, w = (jax.device_put(np.asarray(a, dt)) for a in (d.f_r, d.wi, d.wo, 1 / d.sigma**2))
+            geo = lambda: _scanline._geometry_chunk(f, wi, wo, None, w, normalization="ward1992", dtype=dt)
+            parts = jax.block_until_ready(geo())
+            mom = lambda: _data.moments_chunk(*parts, None, iso=True)
+            prep = jax.block_until_ready(mom())
+            search = lambda: _scanline._search_chunk(prep, iso=True, rtol=rtol, check=True)
+            jax.block_until_ready(search())
+            t = [_best(s) for s in (geo, mom, search)]
+        print(
+            f"  {dt.name}: geometry {t[0] * 1e3:.1f} ms, moments {t[1] * 1e3:.1f} ms, search {t[2] * 1e3:.1f} ms "
+            f"-> {n / sum(t):,.0f} fits/s for the three stages alone"
+        )
+
+
+def chunks(n: int, sizes: list[int]) -> None:
+    """fits/s at ``n`` scanlines on the device for several chunk sizes (the default is 32,768 on a GPU)."""
+    from benchmarks.bench_fit import make_data
+
+    _, d = make_data(n, seed=n)
+    print(f"\n{n:,} scanlines on the device, fits/s by chunk size (best of 3):")
+    for dt in (np.float64, np.float32):
+        _chunk_rates(d, np.dtype(dt), n, sizes)
+
+
+def _chunk_rates(d, dt, n, sizes) -> None:
+    import jax
+
+    import wardjax as wj
+
+    with jax.enable_x64(True):
+        arrays = [jax.device_put(np.asarray(a, dt)) for a in (d.f_r, d.wi, d.wo, 1 / d.sigma**2)]
+    f, wi, wo, w = jax.block_until_ready(arrays)
+    for c in sizes:
+        res = wj.fit_scanlines(f, wi, wo, weights=w, dtype=dt, chunk_size=c)
+        rate = n / _best(lambda c=c: wj.fit_scanlines(f, wi, wo, weights=w, dtype=dt, chunk_size=c))
+        print(f"  {dt.name} chunk {c:>7,}: {rate:>12,.0f} fits/s   ({int(np.sum(res.ok))} converged)")
 
 
 def main(argv=None) -> int:
     import jax
 
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--sizes", default="1000,10000,100000,1000000", help="scanline counts (default 10³–10⁶)")
+    ap.add_argument("--chunks", default="32768,131072", help="chunk sizes tried at the largest size")
+    ap.add_argument("--synthesis", type=int, default=1024, help="texture side for bench_synthesis (0: skip)")
+    ap.add_argument("--cpu", action="store_true", help="run without a GPU (to check this script)")
+    args = ap.parse_args(argv)
     backend = jax.default_backend()
-    if backend not in ("gpu", "cuda", "rocm"):
+    if backend not in ("gpu", "cuda", "rocm") and not args.cpu:
         print(f"bench-gpu: no GPU found (JAX backend {backend!r}); skipped.")
         return 0
     from benchmarks import bench_fit, bench_synthesis
 
-    print(f"JAX {jax.__version__}, devices: {', '.join(d.device_kind for d in jax.devices())}")
-    bench_fit.main(["--sizes", "1000,10000,100000,1000000", "--scipy-max", "200", "--ward-samples", "20000000"])
-    bench_synthesis.main(1024)
+    sizes = [int(s) for s in args.sizes.split(",")]
+    print(f"JAX {jax.__version__}, devices: {', '.join(d.device_kind for d in jax.devices())}", flush=True)
+    bench_fit.main(["--sizes", args.sizes, "--scipy-max", "200", "--ward-samples", "20000000"])
+    stages(min(32768, sizes[-1]))
+    chunks(sizes[-1], [int(c) for c in args.chunks.split(",")])
+    sys.stdout.flush()
+    if args.synthesis:
+        bench_synthesis.main(args.synthesis)
     return 0
 
 

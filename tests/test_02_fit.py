@@ -428,3 +428,48 @@ def test_padded_samples_leave_the_prepared_scanline_unchanged(rng, n):
         )
     for name in ("grid_gw", "grid_gwf", "grid_g2w"):
         assert not np.any(np.asarray(getattr(padded, name))[..., m:]), name
+
+
+def test_device_arrays_stay_on_the_device_and_fit_the_same(iso_fit, monkeypatch):
+    """``jax.Array`` inputs are fitted where they are: no host array larger than an index list is
+    put on the device during the fit, and the results equal the NumPy inputs' — float64, float32
+    (with its float64 refits) and the profile-likelihood rows, masks and per-sample weights too."""
+    _, data, ref = iso_fit
+    put = jax.device_put
+    from_host = []
+
+    def recording_put(x, *args, **kwargs):
+        from_host.extend(a.nbytes for a in jax.tree_util.tree_leaves(x) if isinstance(a, np.ndarray))
+        return put(x, *args, **kwargs)
+
+    w = 1 / data.sigma**2
+    mask = np.ones(data.f_r.shape[:2], bool)
+    mask[::7, :40] = False
+    with jax.enable_x64(True):
+        on_dev = [jax.device_put(a) for a in (data.f_r, data.wi, data.wo, w, mask, w[..., 0])]
+    assert on_dev[0].dtype == np.float64
+    cases = [
+        (dict(weights=w), dict(weights=on_dev[3]), ref),
+        (
+            dict(weights=w[..., 0], mask=mask, dtype=np.float32),
+            dict(weights=on_dev[5], mask=on_dev[4], dtype=np.float32),
+            None,
+        ),
+        (dict(weights=w, errors="profile"), dict(weights=on_dev[3], errors="profile"), None),
+    ]
+    for host_kw, dev_kw, host in cases:
+        host = host or wj.fit_scanlines(data.f_r, data.wi, data.wo, **host_kw)
+        from_host.clear()
+        with monkeypatch.context() as m:
+            m.setattr(jax, "device_put", recording_put)
+            dev = wj.fit_scanlines(*on_dev[:3], **dev_kw)
+        # From the host only the profiled rows' own fits (their ρs, α, χ², covariance), never the samples.
+        assert sum(from_host) < on_dev[0].nbytes / 10, from_host
+        if host_kw.get("errors") == "profile":
+            assert from_host  # the recording sees the profile's small arrays: it is not blind
+        for name in ("rho_d", "rho_s", "alpha_x"):
+            np.testing.assert_array_equal(getattr(dev.params, name), getattr(host.params, name), err_msg=name)
+        np.testing.assert_array_equal(dev.stderr.alpha_x, host.stderr.alpha_x)
+        np.testing.assert_array_equal(dev.errors, host.errors)
+    with pytest.raises(ValueError, match="weights must be non-negative"):
+        wj.fit_scanlines(*on_dev[:3], weights=-on_dev[3])

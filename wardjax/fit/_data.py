@@ -14,7 +14,6 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .. import _shapes
 from . import _varpro
 
 __all__ = [
@@ -36,8 +35,13 @@ def check_choice(name, value, allowed):
         raise ValueError(f"{name}={value!r} is not one of {', '.join(map(repr, allowed))}")
 
 
-def _as_batch(name: str, x, shape: tuple[int, ...] | None = None) -> np.ndarray:
-    arr = np.asarray(x)
+def _on_device(a) -> bool:
+    """True for a :class:`jax.Array`: kept where it is (no copy to the host and back)."""
+    return isinstance(a, jax.Array)
+
+
+def _as_batch(name: str, x, shape: tuple[int, ...] | None = None):
+    arr = x if _on_device(x) else np.asarray(x)
     if arr.dtype == object or not (np.issubdtype(arr.dtype, np.number) or arr.dtype == bool):
         raise TypeError(f"{name} must be a numeric array, got dtype {arr.dtype}")
     if shape is not None and arr.shape != shape:
@@ -45,9 +49,26 @@ def _as_batch(name: str, x, shape: tuple[int, ...] | None = None) -> np.ndarray:
     return arr
 
 
+@jax.jit
+def _any_negative_jit(a):
+    return jnp.any(a < 0)
+
+
+def _any_negative(a) -> bool:
+    """``any(a < 0)`` where ``a`` is, on the host or on its device (float64 kept)."""
+    if not _on_device(a):
+        return bool(np.any(a < 0))
+    with jax.enable_x64(True):
+        return bool(_any_negative_jit(a))
+
+
 def validate(f_r, wi, wo, mask, weights):
-    """Check shapes and types at the boundary (cheap); cleaning happens inside the kernel."""
-    f = np.asarray(f_r)
+    """Check shapes and types at the boundary (cheap); cleaning happens inside the kernel.
+
+    NumPy inputs stay NumPy; :class:`jax.Array` inputs stay on their device (a
+    pipeline that keeps its data on a GPU pays no host round trip).
+    """
+    f = f_r if _on_device(f_r) else np.asarray(f_r)
     if f.ndim != 3 or f.shape[-1] != 3:
         raise ValueError(f"f_r must have shape (S, N, 3) (scanlines, samples, RGB), got {f.shape}")
     shape = f.shape
@@ -63,16 +84,16 @@ def validate(f_r, wi, wo, mask, weights):
             raise ValueError(
                 f"weights must have shape (S, N) or (S, N, 3) = {(s, n)} or {shape}, got {np.shape(weights)}"
             )
-        if np.any(wt < 0):
+        if _any_negative(wt):
             raise ValueError("weights must be non-negative (they are 1/σ² per sample)")
         weights = wt
     if mask is not None:
-        m = np.asarray(mask)
+        m = mask if _on_device(mask) else np.asarray(mask)
         if m.shape == (s, n):
             m = m[..., None]
         if m.shape not in ((s, n, 1), (s, n, 3)):
             raise ValueError(f"mask must have shape (S, N) or (S, N, 3), got {np.shape(mask)}")
-        mask = m.astype(bool, copy=False)
+        mask = m if m.dtype == bool else m.astype(bool)
     return f, wi, wo, mask, weights
 
 
@@ -135,9 +156,25 @@ SAMPLE_FILL = (np.nan, np.nan, np.nan, False, 0.0)
 
 def pad_samples(data, n: int):
     """``data`` with the sample axis padded to ``n`` by unusable samples (zero weight after :func:`clean`)."""
-    return tuple(
-        None if a is None else _shapes.pad_to_shape(a, a.shape[:1] + (n,), fill) for a, fill in zip(data, SAMPLE_FILL)
-    )
+    return tuple(None if a is None else _pad(a, 1, n, fill) for a, fill in zip(data, SAMPLE_FILL))
+
+
+def _pad(a, axis: int, size: int, fill: float = 0.0):
+    """``a`` padded with ``fill`` at the end of ``axis`` to ``size``, on the host or on its device."""
+    if a.shape[axis] == size:
+        return a
+    if _on_device(a):  # compiled, so that no scalar travels from the host
+        return _pad_on_device(a, axis=axis, size=size, nan=bool(np.isnan(fill)), fill=0 if np.isnan(fill) else fill)
+    pad = [(0, 0)] * a.ndim
+    pad[axis] = (0, size - a.shape[axis])
+    return np.pad(a, pad, constant_values=fill)
+
+
+@functools.partial(jax.jit, static_argnames=("axis", "size", "nan", "fill"))
+def _pad_on_device(a, *, axis, size, nan, fill):
+    pad = [(0, 0)] * a.ndim
+    pad[axis] = (0, size - a.shape[axis])
+    return jnp.pad(a, pad, constant_values=jnp.nan if nan else fill)
 
 
 @functools.partial(jax.jit, static_argnames=("iso",))
@@ -146,8 +183,6 @@ def moments_chunk(f, u, v, g, w, n, *, iso):
     return jax.vmap(lambda *a: _varpro.prepare(*a, iso=iso, n=n))(f, u, v, g, w)
 
 
-def pad_rows(a: np.ndarray, rows: int) -> np.ndarray:
-    if a.shape[0] == rows:
-        return a
-    pad = [(0, rows - a.shape[0])] + [(0, 0)] * (a.ndim - 1)
-    return np.pad(a, pad)
+def pad_rows(a, rows: int):
+    """``a`` with zero rows appended to ``rows`` (NumPy, or a :class:`jax.Array` on its device)."""
+    return _pad(a, 0, rows)

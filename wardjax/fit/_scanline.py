@@ -364,7 +364,7 @@ def _profile_where_nonlinear(sol: _varpro.ScanlineSolution, data, *, normalizati
     n_true = data[0].shape[1]
     n_pad = _shapes.bucket(n_true)
     sub = pad_samples(sub, n_pad)
-    chunk = _CHUNK[np.dtype(np.float64)] * len(devices)
+    chunk = _default_chunk(np.float64, devices) * len(devices)
     scale = np.asarray(sol.chi2, np.float64)[rows] / np.maximum(np.asarray(sol.dof)[rows], 1)
     fit = [np.asarray(a, np.float64)[rows] for a in (sol.alpha[:, 0], sol.rho_s, sol.chi2, sol.cov)]
     with jax.enable_x64(True):
