@@ -61,6 +61,7 @@ Model = Literal["isotropic", "anisotropic"]
 # slower; measured here, 1,024 rows beat 4,096 in float32 too (14.3k vs 9.7k
 # fits per CPU-second).
 _CHUNK = {np.dtype(np.float64): 1024, np.dtype(np.float32): 1024}
+_ACCELERATOR_CHUNK = 131_072  # per device, on a GPU with ≥ 32 GB (see _default_chunk)
 
 
 # --------------------------------------------------------------------------- results
@@ -225,8 +226,8 @@ def fit_scanlines(
         float32 fit is not certified (``max_steps``, ``nonfinite``) are
         fitted again in float64, so float32 loses no accuracy.
     chunk_size
-        Scanlines per compiled call and device; default 1024 on CPU, 32768
-        on an accelerator.
+        Scanlines per compiled call and device; default 1024 on CPU, 131,072
+        on an accelerator with ≥ 32 GB of memory (32,768 on a smaller one).
     devices
         JAX devices to spread each call's scanlines over (``NamedSharding``
         over a 1-D mesh, scanline axis); default ``jax.devices()``. Scanlines
@@ -302,8 +303,15 @@ def _check_devices(devices) -> list:
 
 
 def _default_chunk(dtype, devices) -> int:
-    """Rows per call and device: 1024 on CPU (cache-sized), 32768 on an accelerator (enough threads to fill it)."""
-    return _CHUNK[np.dtype(dtype)] if devices[0].platform == "cpu" else 32768
+    """Rows per call and device: 1024 on CPU (cache-sized); on an accelerator 131,072 where it has ≥ 32 GB
+    (one call then holds ~5 GB in float64), else 32,768. Measured on an H200 with 10⁶ scanlines on the
+    device: 131,072 rows gave 2.58 M fits/s in float64 against 1.96 M at 32,768 (3.75 vs 2.92 M in float32).
+    """
+    device = devices[0]
+    if device.platform == "cpu":
+        return _CHUNK[np.dtype(dtype)]
+    limit = (device.memory_stats() or {}).get("bytes_limit", 0)
+    return _ACCELERATOR_CHUNK if limit >= 32 << 30 else _ACCELERATOR_CHUNK // 4
 
 
 def _placement(devices):
@@ -364,7 +372,8 @@ def _profile_where_nonlinear(sol: _varpro.ScanlineSolution, data, *, normalizati
     n_true = data[0].shape[1]
     n_pad = _shapes.bucket(n_true)
     sub = pad_samples(sub, n_pad)
-    chunk = _default_chunk(np.float64, devices) * len(devices)
+    # 33 profile points per row: at most a quarter of the fit's rows per call on an accelerator.
+    chunk = min(_default_chunk(np.float64, devices), _ACCELERATOR_CHUNK // 4) * len(devices)
     scale = np.asarray(sol.chi2, np.float64)[rows] / np.maximum(np.asarray(sol.dof)[rows], 1)
     fit = [np.asarray(a, np.float64)[rows] for a in (sol.alpha[:, 0], sol.rho_s, sol.chi2, sol.cov)]
     with jax.enable_x64(True):
