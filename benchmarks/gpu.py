@@ -57,7 +57,7 @@ def stages(n: int) -> None:
 
 
 def chunks(n: int, sizes: list[int]) -> None:
-    """fits/s at ``n`` scanlines on the device for several chunk sizes (the default on a GPU: 131,072 with ≥ 32 GB, else 32,768)."""
+    """fits/s at ``n`` scanlines on the device by chunk size (GPU default: 131,072 with ≥ 32 GB, else 32,768)."""
     from benchmarks.bench_fit import make_data
 
     _, d = make_data(n, seed=n)
