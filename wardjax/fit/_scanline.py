@@ -348,10 +348,7 @@ def _solve(data, *, iso, normalization, solver, dtype, chunk, devices=None, chec
         pieces = []
         for start, stop, rows in buckets(n_rows, chunk):
             rows = -(-rows // len(devices)) * len(devices)  # whole rows on every device
-            args = [
-                None if a is None else jax.device_put(_narrow(pad_rows(a[start:stop], rows), dtype), sharding)
-                for a in data
-            ]
+            args = [None if a is None else jax.device_put(pad_rows(a[start:stop], rows), sharding) for a in data]
             if solver == "fast":
                 out = _fast_chunk(*args, n=n, iso=iso, rtol=rtol, normalization=normalization, dtype=dtype, check=check)
             else:
@@ -359,14 +356,6 @@ def _solve(data, *, iso, normalization, solver, dtype, chunk, devices=None, chec
             pieces.append((out, stop - start))  # dispatched asynchronously
         sol = [jax.tree_util.tree_map(lambda a, n=n: np.asarray(a)[:n], o) for o, n in pieces]
         return jax.tree_util.tree_map(lambda *a: np.concatenate(a).astype(np.float64), *sol)
-
-
-def _narrow(a, dtype):
-    """A host chunk cast to a float32 fit's dtype before it is copied: half the bytes, the same values
-    (the kernel casts to ``dtype`` first thing, with the same round-to-nearest)."""
-    if isinstance(a, np.ndarray) and a.dtype == np.float64 and dtype == np.float32:
-        return a.astype(np.float32)
-    return a
 
 
 def _profile_where_nonlinear(sol: _varpro.ScanlineSolution, data, *, normalization, devices=None) -> None:
