@@ -298,3 +298,29 @@ def test_twin_signatures_reported_as_not_told_apart():
     # one effect alone: nothing to confuse it with
     alone = discover(ScanlineModel(), case.data, effects=effects[:1], keep_plot_data=False)
     assert alone.found == ["illumination_gradient"] and not alone.ambiguous
+
+
+def test_an_optional_parameter_must_pay_its_way():
+    """The illumination field's tilt ``b_st`` is optional: on a pure ramp discovery adds the reduced form
+    (``b_st`` held at 0, ``k = 1``, one ``ln N`` cheaper in ΔBIC); once the data carry a tilt as well, the
+    full form (``k = 2``) wins and recovers it."""
+    import equinox as eqx
+
+    from wardjax.effects._library import get_effect
+
+    effects = (get_effect("illumination_gradient"),)
+    case = bench.simulate_case("illumination_gradient", bench.case_seed(0, "illumination_gradient", 0), n_samples=64)
+    ramp = discover(ScanlineModel(), case.data, effects=effects, keep_plot_data=False)
+    st = ramp.steps[0]
+    assert ramp.found == ["illumination_gradient"] and st.evidence.k == 1
+    assert st.params["b_st"] == 0.0 and st.params["b"] != 0.0
+    # a tilt on top, f × exp(k Δ(st)), sized to 8 σ RMS (first order)
+    d = case.data
+    dst = np.asarray(d.cov["illum_st"])[..., None]
+    y, sig = np.asarray(d.y), np.asarray(d.sigma)
+    k = 8.0 / np.sqrt(np.nanmean((y * dst / sig) ** 2))
+    tilted = discover(ScanlineModel(), eqx.tree_at(lambda t: t.y, d, y * np.exp(k * dst)), effects=effects)
+    st2 = tilted.steps[0]
+    assert tilted.found == ["illumination_gradient"] and st2.evidence.k == 2
+    assert abs(st2.params["b_st"] - k) < 3 * st2.stderr["b_st"] + 0.05 * abs(k), (st2.params, st2.stderr, k)
+    assert abs(st2.params["b"] - st.params["b"]) < 3 * st2.stderr["b"]

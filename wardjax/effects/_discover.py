@@ -93,10 +93,11 @@ _CONFUSABLE = {
 _REFINE_BIC = 0.5  # ... a runner-up matters if its ΔBIC (a lower bound) is at least this fraction of the winner's
 
 
-def _lr_p(dchi2: float, e: Effect) -> float:
+def _lr_p(dchi2: float, e: Effect, k: int | None = None) -> float:
+    """Likelihood-ratio p-value of ``dchi2`` on ``k`` (default ``e.k``) parameters."""
     if dchi2 <= 0:
         return 1.0
-    k = e.k
+    k = e.k if k is None else k
     if any(p.sign for p in e.params):  # boundary mixture ½χ²_{k−1} + ½χ²_k
         lo = chdtrc(k - 1, dchi2) if k > 1 else 0.0
         return float(0.5 * lo + 0.5 * chdtrc(k, dchi2))
@@ -205,6 +206,7 @@ class _Search:
             active=tuple(active),
             values=self.layout.natural(u),
             sigma=self.layout.sigma(u, cov),
+            free=tuple(int(j) for j in idx[km]),
         )
 
     def residual_view(self, st: FitState) -> _View:
@@ -303,21 +305,29 @@ def _fit_baseline(search: _Search) -> FitState:
 def _candidate_jobs(search: _Search, cur: FitState, remaining: list[int]):
     """Jobs extending ``cur`` by each remaining effect, one per start of that effect.
 
-    Returns the jobs, the index of the effect each job tests, and the free
+    Returns the jobs, ``(effect index, form)`` of each job, and the free
     parameter indices of ``cur`` (model plus active effects), which every job
-    frees together with its own effect's.
+    frees together with its own effect's. Form 0 frees all the effect's
+    parameters; form 1, for an effect with optional parameters, holds those
+    at their absent value.
     """
     layout, testable = search.layout, search.testable
     jobs, owner = [], []
-    free_cur = layout.slices["model"] + [j for i in cur.active for j in layout.slices[testable[i].name]]
+    free_cur = list(cur.free) or (
+        layout.slices["model"] + [j for i in cur.active for j in layout.slices[testable[i].name]]
+    )
     for i in remaining:
         e = testable[i]
-        for st in e.starts():
-            u0 = cur.u.copy()
-            for j, v in zip(layout.slices[e.name], st):
-                u0[j] = layout.entries[j][1].to_u(v)
-            jobs.append((u0, free_cur + layout.slices[e.name], cur.active + (i,)))
-            owner.append(i)
+        own = layout.slices[e.name]
+        pinned = [j for j, p in zip(own, e.params) if p.optional]
+        forms = [own] + ([[j for j in own if j not in pinned]] if pinned else [])
+        for form, free_e in enumerate(forms):
+            for st in e.starts():
+                u0 = cur.u.copy()
+                for j, v, p in zip(own, st, e.params):
+                    u0[j] = p.to_u(v if j in free_e else p.absent)
+                jobs.append((u0, free_cur + free_e, cur.active + (i,)))
+                owner.append((i, form))
     return jobs, owner, free_cur
 
 
@@ -330,21 +340,24 @@ def _score_candidate(search: _Search, cur: FitState, structure_p_of: Callable[[s
     """
     e = search.testable[i]
     sts = [search.state_of(r, cur.active + (i,)) for r in rs]
+    # parameters each fit spends on the effect: all of them, or the reduced form without its optional ones
+    ks = [len(st.free) - len(cur.free) + e.n_data_params if cur.free else e.k for st in sts]
     phys = [k for k, st in enumerate(sts) if e.physical(st.values[e.name])]
     pool = phys or range(len(sts))
-    k = min(pool, key=lambda k: sts[k].chi2) if sts else None
+    # the best form by BIC (for an effect without optional parameters: the lowest χ²)
+    k = min(pool, key=lambda k: sts[k].chi2 + ks[k] * search.ln_n) if sts else None
     sp = structure_p_of(e.covariate)
     if k is None:
         return Candidate(e.name, e.k, math.nan, -math.inf, 1.0, 0.0, sp, False, None, math.nan), None
-    chosen = sts[k]
+    chosen, n_k = sts[k], ks[k]
     dchi2 = max(cur.chi2 - chosen.chi2 if phys else 0.0, 0.0)
     excess = max(cur.chi2 - cur.dof, dchi2, 1e-300)
     return Candidate(
         effect=e.name,
-        k=e.k,
+        k=n_k,
         delta_chi2=dchi2,
-        delta_bic=dchi2 - e.k * search.ln_n,
-        p_value=_lr_p(dchi2, e),
+        delta_bic=dchi2 - n_k * search.ln_n,
+        p_value=_lr_p(dchi2, e, n_k),
         explained=dchi2 / excess,
         structure_p=sp,
         physical=bool(phys),
@@ -353,7 +366,7 @@ def _score_candidate(search: _Search, cur: FitState, structure_p_of: Callable[[s
     ), k
 
 
-def _continue_contenders(search: _Search, cur: FitState, remaining: list[int], fits: dict, scored: dict, score):
+def _continue_contenders(search: _Search, cur: FitState, remaining: list, fits: dict, scored: dict, score):
     """Continue the fits that stopped at the step cap where they decide the step, and rescore them in place.
 
     These are the winner's and those of runners-up whose ΔBIC (a lower bound
@@ -362,7 +375,7 @@ def _continue_contenders(search: _Search, cur: FitState, remaining: list[int], f
     Repeats until no such unconverged fit is left unrefined, since a
     continued fit can change which candidate leads.
     """
-    refined: set[int] = set()
+    refined: set = set()
     while True:
         top = max(scored[i][0].delta_bic for i in remaining)
         todo = [
@@ -377,8 +390,8 @@ def _continue_contenders(search: _Search, cur: FitState, remaining: list[int], f
             break
         for i in todo:
             k = scored[i][1]
-            fits[i][k] = search.refine(fits[i][k], cur.active + (i,))
-            scored[i] = score(i, fits[i])
+            fits[i][k] = search.refine(fits[i][k], cur.active + (i[0],))
+            scored[i] = score(i[0], fits[i])
             refined.add(i)
 
 
@@ -391,7 +404,9 @@ def _deflated(search: _Search, cur: _View, cand: Candidate, state: FitState) -> 
     deff = search.cross.design_effect(np.asarray(cur.r), np.asarray(new.r), np.asarray(new.pred))
     e = next(t for t in search.testable if t.name == cand.effect)
     dchi2 = cand.delta_chi2 / deff
-    return dataclasses.replace(cand, delta_bic=dchi2 - e.k * search.ln_n, p_value=_lr_p(dchi2, e), design_effect=deff)
+    return dataclasses.replace(
+        cand, delta_bic=dchi2 - cand.k * search.ln_n, p_value=_lr_p(dchi2, e, cand.k), design_effect=deff
+    )
 
 
 def _rank_candidates(search: _Search, cur: _View, remaining: list[int]):
@@ -417,15 +432,23 @@ def _rank_candidates(search: _Search, cur: _View, remaining: list[int]):
 
     res = search.fit(jobs)
     score = functools.partial(_score_candidate, search, cur.state, structure_p_of)
-    fits = {i: [r for r, o in zip(res, owner) if o == i and np.isfinite(r[1])] for i in remaining}
-    scored = {i: score(i, fits[i]) for i in remaining}
-    _continue_contenders(search, cur.state, remaining, fits, scored, score)
-    by_effect = {i: st for i in remaining if scored[i][1] is not None and (st := scored[i][0].state) is not None}
-    evidence = {i: scored[i][0] for i in remaining}
+    keys = list(dict.fromkeys(owner))  # (effect, form)
+    fits = {key: [r for r, o in zip(res, owner) if o == key and np.isfinite(r[1])] for key in keys}
+    scored = {key: score(key[0], fits[key]) for key in keys}
+    _continue_contenders(search, cur.state, keys, fits, scored, score)
+    by_form = {key: st for key in keys if scored[key][1] is not None and (st := scored[key][0].state) is not None}
+    evidence = {key: scored[key][0] for key in keys}
     if search.cross is not None:  # the texture between scanlines and channels inflates coherent evidence
-        for i in by_effect:
-            if evidence[i].delta_bic > 0:
-                evidence[i] = _deflated(search, cur, evidence[i], by_effect[i])
+        for key in by_form:
+            if evidence[key].delta_bic > 0:
+                evidence[key] = _deflated(search, cur, evidence[key], by_form[key])
+    # each effect by its better form (the reduced one where its optional parameters do not pay their way)
+    best = {}
+    for key in keys:
+        if key[0] not in best or evidence[key].delta_bic > evidence[best[key[0]]].delta_bic:
+            best[key[0]] = key
+    by_effect = {i: by_form[key] for i, key in best.items() if key in by_form}
+    evidence = {i: evidence[key] for i, key in best.items()}
     cands = list(evidence.values())
     cands.sort(key=lambda c: -c.delta_bic)
     return cands, by_effect

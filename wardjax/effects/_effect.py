@@ -55,6 +55,11 @@ class Param(NamedTuple):
         value: it keeps a parameter that the data cannot pin down (a lobe
         width while its amplitude is near zero) from wandering, so the
         optimiser converges; its deviance is not counted in the gap.
+    optional
+        A refinement of the effect that must earn its own place: discovery
+        also tries the effect with this parameter held at ``absent`` (one
+        parameter fewer in ``k``) and keeps whichever form has the larger
+        ΔBIC; once the reduced form is added it stays reduced.
     """
 
     name: str
@@ -67,6 +72,7 @@ class Param(NamedTuple):
     unit: str = ""
     doc: str = ""
     prior_sd: float = 0.0
+    optional: bool = False
 
     def to_u(self, value: float) -> float:
         if self.kind == "log":

@@ -239,7 +239,7 @@ class IlluminationGradient(_ScanlineEffect):
     requires = ("illum_s", "illum_st")
     params = (
         Param("b", 0.0, scale=0.1, doc="log-gradient of the field across the stripline (per image width or 100 mm)"),
-        Param("b_st", 0.0, scale=0.3, doc="cross term s·t of the field's log (tilt)"),
+        Param("b_st", 0.0, scale=0.3, optional=True, doc="cross term s·t of the field's log (tilt)"),
     )
 
     def _log_factor(self, v, ctx):

@@ -36,6 +36,7 @@ class FitState:
     active: tuple[int, ...]
     values: dict
     sigma: dict
+    free: tuple[int, ...] = ()  # indices of u the fit moved (an effect's optional parameters may stay pinned)
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
