@@ -64,9 +64,10 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 import numpy as np
-from scipy.special import chdtrc, ndtr  # χ² and normal tails: scipy.stats's own kernels, ~1 s less import
+from scipy.special import ndtr  # the normal tail: scipy.stats's own kernel, ~1 s less import
 
 from ._effect import Effect, Param
+from ._evidence import _NOISE_Z, _gap_p, _lr_p, _within_noise
 from ._library import library
 from ._report import Candidate, DiscoveryReport, FitState, Step
 from ._solve import _cov_full, _fit_batch, _Layout, _residual_view
@@ -80,7 +81,6 @@ _SOLO_MIN_OBS = 20_000  # from this many residuals on, each fit is solved alone 
 # An unconverged fit that matters gets up to this many more rounds of lm_steps (_Search.refine): with the
 # default cap of 20 steps, 240 steps in all, as 60 + 3 rounds gave before the cap was lowered.
 _REFINE_ROUNDS = 11
-_NOISE_Z = 2.0  # stop rule: no effect is added once χ² − dof ≤ _NOISE_Z · √(2 dof)
 _AMBIGUOUS_BIC = 6.0  # a confusable runner-up within this ΔBIC of the winner is named too (Kass & Raftery: < 6)
 # effects whose signatures one capture may not tell apart: a lamp field follows image position, anisotropy the
 # half-vector azimuth, the Fresnel rise the incidence angle, and across one capture's scanlines they covary (on
@@ -91,27 +91,6 @@ _CONFUSABLE = {
     "fresnel": ("illumination_gradient",),
 }
 _REFINE_BIC = 0.5  # ... a runner-up matters if its ΔBIC (a lower bound) is at least this fraction of the winner's
-
-
-def _lr_p(dchi2: float, e: Effect, k: int | None = None) -> float:
-    """Likelihood-ratio p-value of ``dchi2`` on ``k`` (default ``e.k``) parameters."""
-    if dchi2 <= 0:
-        return 1.0
-    k = e.k if k is None else k
-    if any(p.sign for p in e.params):  # boundary mixture ½χ²_{k−1} + ½χ²_k
-        lo = chdtrc(k - 1, dchi2) if k > 1 else 0.0
-        return float(0.5 * lo + 0.5 * chdtrc(k, dchi2))
-    return float(chdtrc(k, dchi2))
-
-
-def _within_noise(st: FitState) -> bool:
-    """The stop rule: the excess ``χ² − dof`` is within ``_NOISE_Z`` SDs (``√(2 dof)``) of what noise gives."""
-    return bool(st.chi2 - st.dof <= _NOISE_Z * math.sqrt(2.0 * st.dof))
-
-
-def _gap_p(chi2: float, dof: int) -> float:
-    """``P(χ²_dof ≥ chi2)``: whether a gap still exceeds the noise level."""
-    return float(chdtrc(dof, chi2))
 
 
 def _flat(a, mask):
