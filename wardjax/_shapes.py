@@ -9,9 +9,12 @@ masked out (zero weight, NaN values) or sliced off.
 
 from __future__ import annotations
 
+import functools
 import operator
 from typing import SupportsIndex
 
+import jax
+import jax.numpy as jnp
 import numpy as np
 
 
@@ -28,11 +31,23 @@ def bucket(n: SupportsIndex) -> int:
     return -(-n // q) * q
 
 
-def pad_to_shape(a: np.ndarray, shape: tuple[SupportsIndex, ...], fill: float | int = 0) -> np.ndarray:
-    """``a`` padded with ``fill`` at the end of its leading axes to ``shape``."""
-    a = np.asarray(a)
+def pad_to_shape(a, shape: tuple[SupportsIndex, ...], fill: float | int = 0):
+    """``a`` padded with ``fill`` at the end of its leading axes to ``shape``.
+
+    A :class:`jax.Array` is padded on its device by a compiled pad (no value
+    travels through the host); anything else is padded as a NumPy array.
+    """
+    if not isinstance(a, jax.Array):
+        a = np.asarray(a)
     if a.shape[: len(shape)] == tuple(shape):
         return a
-    return np.pad(
-        a, [(0, t - n) for t, n in zip(shape, a.shape)] + [(0, 0)] * (a.ndim - len(shape)), constant_values=fill
-    )
+    widths = tuple((0, int(t) - n) for t, n in zip(shape, a.shape)) + ((0, 0),) * (a.ndim - len(shape))
+    if isinstance(a, jax.Array):
+        nan = bool(np.isnan(fill))
+        return _pad_on_device(a, widths=widths, nan=nan, fill=0 if nan else fill)
+    return np.pad(a, widths, constant_values=fill)
+
+
+@functools.partial(jax.jit, static_argnames=("widths", "nan", "fill"))
+def _pad_on_device(a, *, widths, nan, fill):
+    return jnp.pad(a, widths, constant_values=jnp.nan if nan else fill)

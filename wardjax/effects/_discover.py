@@ -292,9 +292,7 @@ def _candidate_jobs(search: _Search, cur: FitState, remaining: list[int]):
     """
     layout, testable = search.layout, search.testable
     jobs, owner = [], []
-    free_cur = list(cur.free) or (
-        layout.slices["model"] + [j for i in cur.active for j in layout.slices[testable[i].name]]
-    )
+    free_cur = list(cur.free)  # the model's and the active effects' (optional ones held stay held)
     for i in remaining:
         e = testable[i]
         own = layout.slices[e.name]
@@ -320,7 +318,7 @@ def _score_candidate(search: _Search, cur: FitState, structure_p_of: Callable[[s
     e = search.testable[i]
     sts = [search.state_of(r, cur.active + (i,)) for r in rs]
     # parameters each fit spends on the effect: all of them, or the reduced form without its optional ones
-    ks = [len(st.free) - len(cur.free) + e.n_data_params if cur.free else e.k for st in sts]
+    ks = [len(st.free) - len(cur.free) + e.n_data_params for st in sts]
     phys = [k for k, st in enumerate(sts) if e.physical(st.values[e.name])]
     pool = phys or range(len(sts))
     # the best form by BIC (for an effect without optional parameters: the lowest χ²)

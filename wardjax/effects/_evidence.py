@@ -15,11 +15,10 @@ from ._report import FitState
 _NOISE_Z = 2.0  # stop rule: no effect is added once χ² − dof ≤ _NOISE_Z · √(2 dof)
 
 
-def _lr_p(dchi2: float, e: Effect, k: int | None = None) -> float:
-    """Likelihood-ratio p-value of ``dchi2`` on ``k`` (default ``e.k``) parameters."""
+def _lr_p(dchi2: float, e: Effect, k: int) -> float:
+    """Likelihood-ratio p-value of ``dchi2`` on the ``k`` parameters a form of ``e`` spends."""
     if dchi2 <= 0:
         return 1.0
-    k = e.k if k is None else k
     if any(p.sign for p in e.params):  # boundary mixture ½χ²_{k−1} + ½χ²_k
         lo = chdtrc(k - 1, dchi2) if k > 1 else 0.0
         return float(0.5 * lo + 0.5 * chdtrc(k, dchi2))

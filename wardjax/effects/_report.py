@@ -36,7 +36,7 @@ class FitState:
     active: tuple[int, ...]
     values: dict
     sigma: dict
-    free: tuple[int, ...] = ()  # indices of u the fit moved (an effect's optional parameters may stay pinned)
+    free: tuple[int, ...]  # indices of u the fit moved (an effect's optional parameters may stay held)
 
 
 @dataclasses.dataclass(frozen=True, eq=False)

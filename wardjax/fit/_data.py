@@ -14,6 +14,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .. import _shapes
 from . import _varpro
 
 __all__ = [
@@ -156,25 +157,9 @@ SAMPLE_FILL = (np.nan, np.nan, np.nan, False, 0.0)
 
 def pad_samples(data, n: int):
     """``data`` with the sample axis padded to ``n`` by unusable samples (zero weight after :func:`clean`)."""
-    return tuple(None if a is None else _pad(a, 1, n, fill) for a, fill in zip(data, SAMPLE_FILL))
-
-
-def _pad(a, axis: int, size: int, fill: float = 0.0):
-    """``a`` padded with ``fill`` at the end of ``axis`` to ``size``, on the host or on its device."""
-    if a.shape[axis] == size:
-        return a
-    if _on_device(a):  # compiled, so that no scalar travels from the host
-        return _pad_on_device(a, axis=axis, size=size, nan=bool(np.isnan(fill)), fill=0 if np.isnan(fill) else fill)
-    pad = [(0, 0)] * a.ndim
-    pad[axis] = (0, size - a.shape[axis])
-    return np.pad(a, pad, constant_values=fill)
-
-
-@functools.partial(jax.jit, static_argnames=("axis", "size", "nan", "fill"))
-def _pad_on_device(a, *, axis, size, nan, fill):
-    pad = [(0, 0)] * a.ndim
-    pad[axis] = (0, size - a.shape[axis])
-    return jnp.pad(a, pad, constant_values=jnp.nan if nan else fill)
+    return tuple(
+        None if a is None else _shapes.pad_to_shape(a, a.shape[:1] + (n,), fill) for a, fill in zip(data, SAMPLE_FILL)
+    )
 
 
 @functools.partial(jax.jit, static_argnames=("iso",))
@@ -185,4 +170,4 @@ def moments_chunk(f, u, v, g, w, n, *, iso):
 
 def pad_rows(a, rows: int):
     """``a`` with zero rows appended to ``rows`` (NumPy, or a :class:`jax.Array` on its device)."""
-    return _pad(a, 0, rows)
+    return _shapes.pad_to_shape(a, (rows,))
