@@ -73,6 +73,8 @@ from __future__ import annotations
 import numpy as np
 from scipy.optimize import nnls
 
+from ._noise import noise_columns
+
 __all__ = [
     "TextureFit",
     "cross_covariance",
@@ -107,11 +109,12 @@ class TextureFit:
     ):
         self.s, self.T, self.rho, self.scale, self.sse_gain, self.acov = s, T, rho, scale, sse_gain, acov
 
-    def sigma(self, level: np.ndarray) -> np.ndarray:
-        """White-noise SD at predicted level ``(S, N, C)``."""
+    def sigma(self, level: np.ndarray, w: np.ndarray | None = None) -> np.ndarray:
+        """White-noise SD at predicted level ``(S, N, C)`` and inverse irradiance ``w`` ``(S, N, 1)`` (default 1):
+        ``√(s0 w² + s1 f w + s2 f²)`` (:func:`~wardjax.effects._noise.noise_columns`)."""
         fc = np.abs(level) / self.scale
-        s = self.s
-        return np.sqrt(s[:, 0] + s[:, 1] * fc + s[:, 2] * fc**2)
+        cols = noise_columns(fc, np.ones_like(fc) if w is None else w)  # (S, N, C, 3)
+        return np.sqrt(np.einsum("snck,ck->snc", cols, self.s))
 
     def significant(self) -> np.ndarray:
         """Per channel: the texture term's F statistic in the lag regression exceeds ``_F_MIN`` (else ``T = 0``)."""
@@ -122,14 +125,14 @@ def _g(rho: float, k: int) -> float:
     return (6.0 - 8.0 * rho**k + 2.0 * rho ** (2 * k)) / 6.0
 
 
-def _lag0_rows(e: np.ndarray, level: np.ndarray):
-    """Squared deviations from each scanline's mean ``(e_i − ē_s)²``, their levels and ``1 − 1/n_s``."""
+def _lag0_rows(e: np.ndarray, level: np.ndarray, inv_irr: np.ndarray):
+    """Squared deviations from each scanline's mean ``(e_i − ē_s)²``, their levels, ``1 − 1/n_s`` and ``w``."""
     ok = np.isfinite(e)
     n = ok.sum(1, keepdims=True)
     mean = np.nansum(e, 1, keepdims=True) / np.maximum(n, 1)
     use = ok & (n >= 8)
     w = np.broadcast_to(1.0 - 1.0 / np.maximum(n, 1), e.shape)
-    return ((e - mean) ** 2)[use], level[use], w[use]
+    return ((e - mean) ** 2)[use], level[use], w[use], inv_irr[use]
 
 
 def _g0(e: np.ndarray, rho: float) -> np.ndarray:
@@ -146,13 +149,17 @@ def _g0(e: np.ndarray, rho: float) -> np.ndarray:
     return g[ok & (n >= 8)]
 
 
-def estimate_texture(e: np.ndarray, level: np.ndarray, ok: np.ndarray, off: np.ndarray | None = None) -> TextureFit:
+def estimate_texture(
+    e: np.ndarray, level: np.ndarray, ok: np.ndarray, off: np.ndarray | None = None, w: np.ndarray | None = None
+) -> TextureFit:
     """Noise and texture per channel from residuals ``e`` ``(S, N, C)`` at predicted ``level``, where ``ok``.
 
-    See the module docstring: NNLS of ``d_k²/6`` on ``[1, f, f², g_ρ(k)]``
-    over the lags, for each ``ρ`` of a grid.
+    See the module docstring: NNLS of ``d_k²/6`` on ``[w², f w, f², g_ρ(k)]``
+    over the lags, for each ``ρ`` of a grid; ``w`` ``(S, N, 1)`` the inverse
+    irradiance (default 1; :func:`~wardjax.effects._noise.noise_columns`).
     """
     c_n = e.shape[-1]
+    w = np.ones(e.shape[:2] + (1,)) if w is None else np.broadcast_to(w, e.shape[:2] + (1,))
     g1 = np.where(ok, e, np.nan)
     gk = g1 if off is None else np.where(ok & off, e, np.nan)
     s_out = np.zeros((c_n, 3))
@@ -161,7 +168,7 @@ def estimate_texture(e: np.ndarray, level: np.ndarray, ok: np.ndarray, off: np.n
     gain = np.zeros(c_n)
     scale = np.ones(c_n)
     for c in range(c_n):
-        rows_y, rows_l, rows_k = [], [], []
+        rows_y, rows_l, rows_w, rows_k = [], [], [], []
         for k in _LAGS:
             if 2 * k >= e.shape[1]:
                 break
@@ -171,14 +178,16 @@ def estimate_texture(e: np.ndarray, level: np.ndarray, ok: np.ndarray, off: np.n
             m = np.isfinite(d2)
             rows_y.append(d2[m])
             rows_l.append(lv[m])
+            rows_w.append(w[:, k:-k, 0][m])
             rows_k.append(np.full(int(m.sum()), k))
-        e0, l0, w0 = _lag0_rows(gk[..., c], level[..., c])
+        e0, l0, w0, ww0 = _lag0_rows(gk[..., c], level[..., c], w[..., 0])
         y = np.concatenate(rows_y + [e0])
         lv = np.concatenate(rows_l + [l0])
+        wv = np.concatenate(rows_w + [ww0])
         kk = np.concatenate(rows_k + [np.zeros(e0.size, int)])
         sc = max(float(np.mean(np.abs(lv))), 1e-30)
         scale[c] = sc
-        base = np.stack([np.ones_like(lv), lv / sc, (lv / sc) ** 2], -1)
+        base = noise_columns(lv / sc, wv)
         base[kk == 0] *= w0[:, None]  # about the scanline mean, white noise keeps (1 − 1/n) of its variance
         coef0, res0 = nnls(base, y)
         best = (np.inf, None, 0.0)
@@ -313,39 +322,59 @@ def _assemble(lags: np.ndarray, n: int, noise: np.ndarray) -> tuple[np.ndarray, 
     return (V * np.maximum(ev, 0.0)) @ V.T, noise
 
 
-def level_noise(e: np.ndarray, level: np.ndarray, ok: np.ndarray, X: np.ndarray) -> np.ndarray:
-    """White-noise coefficients ``(C, 3)`` of ``σ² = s0 + s1 f + s2 f²`` (units of ``level``), texture known.
+def level_noise(
+    e: np.ndarray, level: np.ndarray, ok: np.ndarray, X: np.ndarray, w: np.ndarray | None = None
+) -> np.ndarray:
+    """White-noise coefficients ``(C, 3)`` of ``σ² = s0 w² + s1 f w + s2 f²`` (units of ``level``), texture known.
 
-    Lag-1 second differences over all values, highlight included (the
-    level dependence of shot noise is read there), with the texture's share
-    taken from its measured covariance ``X`` (:func:`joint_autocovariance`)::
+    Lag-1 second differences ``d = e_{i−1} − 2 e_i + e_{i+1}`` over all
+    values, highlight included (the level dependence of shot noise is read
+    there), less the texture's share. With several channels that share is
+    read *at each value* from the other channels: the noise is independent
+    between channels and the texture is one pattern scaled per channel, so
+    ``E[d_c d_{c'}] = (a_c/a_{c'}) ⁻¹ E[d_c²]_texture`` and::
 
-        E[d²]/6 = σ²(f) + (6 c(0) − 8 c(1) + 2 c(2))/6
+        E[d_c² − r_{cc'} d_c d_{c'}]/6 = σ_c²(f, w),   r_{cc'} = X_{cc}(0)/X_{cc'}(0)
 
-    NNLS on ``[1, f, f²]``. The exponential's fit read the level dependence
-    as texture where the texture dominates off the highlight (``s1 = s2 =
-    0`` on the noise-textured captures), so the highlight's noise was
-    underestimated (whitened mean square 1.17–1.29 there) and lobe-shaped
-    effects gained spurious evidence.
+    (``X`` the texture's covariance, :func:`joint_autocovariance`; averaged
+    over ``c'``). The texture's share then follows it where its
+    statistics change along a scanline — the step on the sample plane
+    halves from one end of a 160 × 120 capture's scanline to the other, so
+    a rough texture's lag-1 differences are larger at one end — which the
+    stationary share, one channel's ``(6 c(0) − 8 c(1) + 2 c(2))/6``, took
+    for shot noise wherever the highlight sat (whitened mean square 0.54 on
+    the highlight of a noise-textured capture). One channel: that
+    stationary share.
+
+    NNLS on ``[w², f w, f²]`` (``w`` ``(S, N, 1)`` the inverse irradiance,
+    default 1; :func:`~wardjax.effects._noise.noise_columns`).
     """
     s_n, n, c_n = e.shape
+    w = np.ones((s_n, n, 1)) if w is None else np.broadcast_to(w, (s_n, n, 1))
+    g = np.where(ok, e, np.nan)
+    d = g[:, :-2] - 2.0 * g[:, 1:-1] + g[:, 2:]
     out = np.zeros((c_n, 3))
     for c in range(c_n):
         blk = X[c * n : (c + 1) * n, c * n : (c + 1) * n]
         cm = [float(np.mean(np.diagonal(blk, m))) for m in range(3)]
-        tex = (6.0 * cm[0] - 8.0 * cm[1] + 2.0 * cm[2]) / 6.0
-        g = np.where(ok[..., c], e[..., c], np.nan)
-        d2 = (g[:, :-2] - 2.0 * g[:, 1:-1] + g[:, 2:]) ** 2 / 6.0
+        others = [X[c * n, c2 * n] for c2 in range(c_n) if c2 != c]
+        pairs = [(c2, cm[0] / x) for c2, x in zip([k for k in range(c_n) if k != c], others) if x > 0]
+        if pairs:  # the texture's share at each value, from the channels' cross-products
+            tex = np.mean([r * d[..., c] * d[..., c2] for c2, r in pairs], axis=0) / 6.0
+        else:
+            tex = np.full(d.shape[:2], (6.0 * cm[0] - 8.0 * cm[1] + 2.0 * cm[2]) / 6.0)
+        y = d[..., c] ** 2 / 6.0 - tex
         lv = level[:, 1:-1, c]
-        m = np.isfinite(d2)
-        f = lv[m] / max(float(np.mean(np.abs(lv[m]))), 1e-30)
-        coef, _ = nnls(np.stack([np.ones_like(f), f, f * f], -1), d2[m] - tex)
+        m = np.isfinite(y)
         sc = max(float(np.mean(np.abs(lv[m]))), 1e-30)
+        coef, _ = nnls(noise_columns(lv[m] / sc, w[:, 1:-1, 0][m]), y[m])
         out[c] = coef / np.array([1.0, sc, sc * sc])
     return out
 
 
-def off_highlight_variance(fit: TextureFit, e: np.ndarray, level: np.ndarray, off: np.ndarray) -> float:
+def off_highlight_variance(
+    fit: TextureFit, e: np.ndarray, level: np.ndarray, off: np.ndarray, w: np.ndarray | None = None
+) -> float:
     """Mean square of the whitened residuals off the highlight under ``fit``: 1 when the covariance is right.
 
     The residuals ``e`` about each scanline's mean off the highlight (the
@@ -354,7 +383,7 @@ def off_highlight_variance(fit: TextureFit, e: np.ndarray, level: np.ndarray, of
     """
     s_n, n, c_n = e.shape
     eo = _centred(e, off)
-    sigma = np.where(off, fit.sigma(level), 1.0)
+    sigma = np.where(off, fit.sigma(level, w), 1.0)
     W = texture_whitening(fit, sigma, off)
     z = np.where(off, eo, 0.0) / sigma
     if W.ndim == 3:
