@@ -36,7 +36,14 @@ Why this form (measured, see docs/missing-effects.md)
     candidate's evidence as a design effect (:func:`design_effect`), which
     is what stopped marble's veins being named an illumination gradient.
 
-Estimating ``T`` and ``ρ`` from one capture
+Estimating ``T`` and ``ρ`` from one capture (the significance test)
+    :func:`~wardjax.effects._texture_term.with_texture` uses this estimate
+    only to decide whether there is a texture to carry: its white noise read
+    0 on every bench texture (the exponential takes the whole drop from lag
+    0 to lag 1). The noise the model carries is read between channels
+    (:func:`~wardjax.effects._texture_term.white_noise_share`) and its shape
+    by :func:`level_noise`.
+
     From the residuals ``e = y − f̂`` of the baseline fit, second differences
     at lag ``k``, ``d_k = e_{i−k} − 2 e_i + e_{i+k}``, cancel the level and any
     trend of a smooth misfit (an effect), and have::

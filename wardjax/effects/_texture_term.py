@@ -33,8 +33,10 @@ _NOISE_FLOOR = 0.02  # white noise off the highlight at least this fraction of t
 def with_texture(data, pred: np.ndarray):
     """``data`` with the texture carried as a Gaussian process, a summary, and the texture the process leaves out.
 
-    Returns ``(data, summary, CrossTexture)``. The white noise is re-estimated jointly with the texture from the
-    baseline's residuals (the lag-1 estimate counted texture as noise); the
+    Returns ``(data, summary, CrossTexture)``. The white noise is re-estimated with the texture from the
+    baseline's residuals (the lag-1 estimate counted texture as noise): its level off the highlight from the
+    channels' cross-covariance (:func:`white_noise_share`), its shape in the level and the lamp's inverse
+    irradiance from lag-1 differences (:func:`~wardjax.effects._texture.level_noise`); the
     process's autocovariance along the scanline is the measured one
     (:func:`~wardjax.effects._texture.joint_autocovariance`), and the
     covariance between neighbouring scanlines and channels goes into each
