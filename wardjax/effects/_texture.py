@@ -339,7 +339,7 @@ def level_noise(
     there), less the texture's share. With several channels that share is
     read *at each value* from the other channels: the noise is independent
     between channels and the texture is one pattern scaled per channel, so
-    ``E[d_c d_{c'}] = (a_c/a_{c'}) ⁻¹ E[d_c²]_texture`` and::
+    ``E[d_c d_{c'}] = (a_{c'}/a_c) E[d_c²]_texture`` and::
 
         E[d_c² − r_{cc'} d_c d_{c'}]/6 = σ_c²(f, w),   r_{cc'} = X_{cc}(0)/X_{cc'}(0)
 
@@ -364,8 +364,7 @@ def level_noise(
     for c in range(c_n):
         blk = X[c * n : (c + 1) * n, c * n : (c + 1) * n]
         cm = [float(np.mean(np.diagonal(blk, m))) for m in range(3)]
-        others = [X[c * n, c2 * n] for c2 in range(c_n) if c2 != c]
-        pairs = [(c2, cm[0] / x) for c2, x in zip([k for k in range(c_n) if k != c], others) if x > 0]
+        pairs = [(c2, cm[0] / X[c * n, c2 * n]) for c2 in range(c_n) if c2 != c and X[c * n, c2 * n] > 0]
         if pairs:  # the texture's share at each value, from the channels' cross-products
             tex = np.mean([r * d[..., c] * d[..., c2] for c2, r in pairs], axis=0) / 6.0
         else:
@@ -377,29 +376,6 @@ def level_noise(
         coef, _ = nnls(noise_columns(lv[m] / sc, w[:, 1:-1, 0][m]), y[m])
         out[c] = coef / np.array([1.0, sc, sc * sc])
     return out
-
-
-def off_highlight_variance(
-    fit: TextureFit, e: np.ndarray, level: np.ndarray, off: np.ndarray, w: np.ndarray | None = None
-) -> float:
-    """Mean square of the whitened residuals off the highlight under ``fit``: 1 when the covariance is right.
-
-    The residuals ``e`` about each scanline's mean off the highlight (the
-    highlight's values decoupled), whitened with ``fit`` at the noise of
-    ``level``; ``(n − 1)/n`` per scanline and channel is what the mean takes.
-    """
-    s_n, n, c_n = e.shape
-    eo = _centred(e, off)
-    sigma = np.where(off, fit.sigma(level, w), 1.0)
-    W = texture_whitening(fit, sigma, off)
-    z = np.where(off, eo, 0.0) / sigma
-    if W.ndim == 3:
-        zj = np.einsum("sij,sj->si", W, z.transpose(0, 2, 1).reshape(s_n, c_n * n))
-    else:
-        zj = np.einsum("scij,sjc->scj", W, z).reshape(s_n, -1)
-    k = off.sum(1)  # (S, C) values per scanline and channel
-    dof = float(np.sum(np.maximum(k - 1, 0)))
-    return float(np.sum(zj**2)) / max(dof, 1.0)
 
 
 def cross_covariance(e: np.ndarray, off: np.ndarray, lags: tuple[int, int] = _CROSS_LAGS) -> np.ndarray:
