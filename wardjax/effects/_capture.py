@@ -37,7 +37,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..capture import CAPTURE_FILE, Capture, CaptureError
-from ._models import ScanlineData, scanline_data
+from ._models import ScanlineData, inv_irradiance, scanline_data
 from ._noise import noise_columns
 
 __all__ = ["capture_data"]
@@ -125,8 +125,7 @@ def capture_data(cap: Capture, *, max_samples: int = 20_000, band_rows: int = 51
         raise CaptureError(cfg.images.lit, None, f"no image column holds {MIN_SCANLINE_SAMPLES} usable probe values")
     F, cens = F[keep], cens[keep]
     wi, pts = bins.wi[keep], bins.points[keep]
-    w = np.sum((np.asarray(rig.lamp, float) - pts) ** 2, axis=-1) / np.maximum(wi[..., 2], 1e-6)  # r²/cos θi
-    sigma = _noise_model(F, exact=~cens, w=w)
+    sigma = _noise_model(F, exact=~cens, w=inv_irradiance(pts, rig.lamp, wi))
     return scanline_data(
         F,
         wi,

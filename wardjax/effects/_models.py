@@ -185,12 +185,8 @@ def scanline_data(
         cov["y"] = pts[..., 1]
         cov["illum_s"], cov["illum_st"] = _field_coordinates(pts, camera)
         if lamp is not None:
-            lp = np.asarray(lamp, np.float64)
-            lp = lp[:, None, :] if lp.ndim == 2 else lp[None, None, :]
-            r2 = np.sum((lp - pts) ** 2, axis=-1)
-            w = r2 / np.maximum(wi[..., 2], 1e-6)
-            any_m = m.any(-1)
-            cov["inv_irradiance"] = w / np.mean(w[any_m])
+            w = inv_irradiance(pts, lamp, wi)
+            cov["inv_irradiance"] = w / np.mean(w[m.any(-1)])
     cens = None
     if censored is not None:
         ck = np.asarray(censored, bool)
@@ -214,6 +210,14 @@ def scanline_data(
         f_std=float(rho_standard) / np.pi,
         available=avail,
     )
+
+
+def inv_irradiance(points: np.ndarray, lamp, wi: np.ndarray) -> np.ndarray:
+    """The lamp's inverse irradiance ``r²/cos θi`` ``(S, N)`` at ``points`` ``(S, N, 3)`` (mm) lit from ``lamp``
+    ``(3,)`` or ``(S, 3)`` along ``wi`` ``(S, N, 3)`` (material frame)."""
+    lp = np.asarray(lamp, np.float64)
+    lp = lp[:, None, :] if lp.ndim == 2 else lp[None, None, :]
+    return np.sum((lp - points) ** 2, axis=-1) / np.maximum(wi[..., 2], 1e-6)
 
 
 def _field_coordinates(points: np.ndarray, camera=None) -> tuple[np.ndarray, np.ndarray]:

@@ -79,12 +79,10 @@ def with_texture(data, pred: np.ndarray):
 
 
 def _inv_irradiance(data, m: np.ndarray) -> np.ndarray:
-    """The lamp's inverse irradiance ``(S, N, 1)``, mean 1 where observed (1 where the data carry no lamp)."""
-    w = data.cov.get("inv_irradiance") if isinstance(data.cov, dict) else None
-    if w is None:
-        return np.ones(m.shape[:2] + (1,))
-    w = np.asarray(w, float)
-    return (w / max(float(np.mean(w[m.any(-1)])), 1e-300))[..., None]
+    """The lamp's inverse irradiance ``(S, N, 1)`` (:func:`~wardjax.effects.scanline_data` scales it to mean 1 where
+    observed), 1 where the data carry no lamp."""
+    w = data.cov.get("inv_irradiance")
+    return np.ones(m.shape[:2] + (1,)) if w is None else np.asarray(w, float)[..., None]
 
 
 def _unit_shape(s_lv: np.ndarray, pred: np.ndarray, w: np.ndarray, off: np.ndarray) -> np.ndarray:
