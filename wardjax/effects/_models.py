@@ -349,6 +349,45 @@ def _whiten(W, z):
     return jnp.einsum("scij,sjc->sic", W, z)
 
 
+def _whitened_design(data) -> jnp.ndarray:
+    """``L⁻¹`` of ``1/σ`` on each channel alone (zero off the mask), ``(S, N, C, C_cols)``: ρd's design, whitened."""
+    return _gls_design(data.whiten, jnp.where(data.mask, 1.0 / data.sigma, 0.0))
+
+
+def _gls_design(W, inv_sp):
+    c_n = inv_sp.shape[-1]
+    if W.ndim == 3:
+        eye = jnp.eye(c_n, dtype=inv_sp.dtype)
+        return jnp.stack([_whiten(W, inv_sp * eye[c][None, None, :]) for c in range(c_n)], -1)
+    return jnp.stack([_whiten(W, inv_sp)[..., c][..., None] * jnp.eye(c_n)[c] for c in range(c_n)], -2)
+
+
+def _gls_solve(A, b):
+    """``π`` times the least-squares ``ρd/π`` ``(S, 1, C)`` of whitened data ``b`` ``(S, N, C)`` on design ``A``."""
+    c_n = A.shape[-1]
+    AtA = jnp.einsum("snck,sncl->skl", A, A) + _TINY * jnp.eye(c_n)[None]
+    Atb = jnp.einsum("snck,snc->sk", A, b)
+    return jnp.pi * jnp.linalg.solve(AtA, Atb[..., None])[..., 0][:, None, :]
+
+
+def _measured_as_is(active, effects):
+    """Whether no active effect maps the model's values to the measured ones (``measure``/``unmeasure``) or
+    censors them: ``True``/``False``, a traced flag (a fit's ``active``), or ``None`` (every hook applies)."""
+    flags = []
+    for e in effects:
+        hooks = (_switch(active, e, h) for h in ("measure", "unmeasure"))
+        if getattr(e, "censors", False) or any(h is not _IDENTITY for h in hooks):
+            flag = None if active is None else active.get(e.name)
+            if flag is None:
+                return None
+            flags.append(flag)
+    if not flags:
+        return True
+    if all(isinstance(f, bool) for f in flags):
+        return not any(flags)
+    return ~jnp.any(jnp.stack([jnp.asarray(f) for f in flags]))
+
+
 def _gls_rho(W, inv_sp, resid):
     """ρd per scanline and channel ``(S, 1, C)`` by generalised least squares under the whitening ``W``.
 
@@ -435,6 +474,8 @@ class ScanlineModel:
             "f_std": data.f_std,
         }
         ctx.update(data.cov)
+        if data.whiten is not None:  # once per solve, not once per residual evaluation
+            ctx["whitened_design"] = _whitened_design(data)
         return ctx
 
     def _parts(self, vals, effects, data, ctx, active=None):
@@ -478,29 +519,49 @@ class ScanlineModel:
     def _profile(self, vals, active, effects, data, ctx):
         """Profiled ρd per scanline and channel, whitened residuals, prediction."""
         term = self._parts(vals, effects, data, ctx, active)
-        yp, sp = self._unmeasure(vals, effects, data, ctx, active)
         cens = jnp.zeros(data.y.shape, bool)
         censoring = any(getattr(e, "censors", False) for e in effects)
         if censoring:
             for e in effects:
                 cens = cens | e.censored(active[e.name], data)
-        # ρd from the uncensored values (a censored value only bounds it)
-        use = data.mask & ~cens
-        if data.whiten is None:
-            w = jnp.where(use, 1.0 / (sp * sp), 0.0)
-            sw = jnp.sum(w, axis=1, keepdims=True)
-            rho = jnp.pi * jnp.sum(w * (yp - term), axis=1, keepdims=True) / jnp.maximum(sw, _TINY)
-        else:  # generalised least squares under the texture's covariance
-            rho = _gls_rho(data.whiten, jnp.where(use, 1.0 / sp, 0.0), jnp.where(use, (yp - term) / sp, 0.0))
-        f = rho / jnp.pi + term
-        # the deviance is exact, in the measured space: ρd above is the closed-form profile
-        # of the linearised problem (close to, never better than, the exact optimum), so a
-        # measurement effect cannot lower χ² by stretching the propagated noise
-        for e in effects:
-            f = _gated(_switch(active, e, "measure"), lambda f, e=e: e.measure(vals[e.name], f, ctx), f)
-        z = jnp.where(data.mask, (data.y - f) / data.sigma, 0.0)
-        if data.whiten is not None:  # decoupled (identity) rows where a value is flagged clipped or masked
-            z = _whiten(data.whiten, z)
+
+        def general(_):
+            yp, sp = self._unmeasure(vals, effects, data, ctx, active)
+            # ρd from the uncensored values (a censored value only bounds it)
+            use = data.mask & ~cens
+            if data.whiten is None:
+                w = jnp.where(use, 1.0 / (sp * sp), 0.0)
+                sw = jnp.sum(w, axis=1, keepdims=True)
+                rho = jnp.pi * jnp.sum(w * (yp - term), axis=1, keepdims=True) / jnp.maximum(sw, _TINY)
+            else:  # generalised least squares under the texture's covariance
+                rho = _gls_rho(data.whiten, jnp.where(use, 1.0 / sp, 0.0), jnp.where(use, (yp - term) / sp, 0.0))
+            f = rho / jnp.pi + term
+            # the deviance is exact, in the measured space: ρd above is the closed-form profile
+            # of the linearised problem (close to, never better than, the exact optimum), so a
+            # measurement effect cannot lower χ² by stretching the propagated noise
+            for e in effects:
+                f = _gated(_switch(active, e, "measure"), lambda f, e=e: e.measure(vals[e.name], f, ctx), f)
+            z = jnp.where(data.mask, (data.y - f) / data.sigma, 0.0)
+            if data.whiten is not None:  # decoupled (identity) rows where a value is flagged clipped or masked
+                z = _whiten(data.whiten, z)
+            return rho, f, z
+
+        plain = None if data.whiten is None else _measured_as_is(active, effects)
+        if plain is None or plain is False:
+            rho, f, z = general(None)
+        else:
+            design = ctx["whitened_design"] if "whitened_design" in ctx else _whitened_design(data)
+
+            def direct(_):
+                # nothing between the model and the measured values: the residual is linear in ρd, so its
+                # whitened form is L⁻¹ of (y − Ward terms)/σ less the whitened design times ρd/π — one
+                # whitening per evaluation (and per Jacobian column) instead of five
+                b = _whiten(data.whiten, jnp.where(data.mask, (data.y - term) / data.sigma, 0.0))
+                rho = _gls_solve(design, b)
+                z = b - jnp.einsum("snck,sk->snc", design, rho[:, 0, :] / jnp.pi)
+                return rho, rho / jnp.pi + term, z
+
+            rho, f, z = direct(None) if plain is True else jax.lax.cond(plain, direct, general, None)
         if censoring:
             # a censored value says only "true value ≥ y": P = Φ((f − y)/σ)
             t = jnp.where(cens, -z, 0.0)

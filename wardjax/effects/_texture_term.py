@@ -25,7 +25,7 @@ from ._texture import (
     texture_whitening,
 )
 
-__all__ = ["CrossTexture", "white_noise_share", "with_texture"]
+__all__ = ["CrossTexture", "identity_whitened", "white_noise_share", "with_texture"]
 
 _NOISE_FLOOR = 0.02  # white noise off the highlight at least this fraction of the texture variance
 
@@ -76,6 +76,15 @@ def with_texture(data, pred: np.ndarray):
         "rho": [float(fit.acov[c * n, c * n + 1] / max(tex_var[c], 1e-300)) for c in range(c_n)],
     }
     return new, summary, CrossTexture(y, off, W, sigma, exact)
+
+
+def identity_whitened(data):
+    """``data`` whitened by the identity (``L⁻¹ = I`` per scanline, the channels together): white noise, the same
+    numbers, in the layout :func:`with_texture` gives (so that one compiled program fits both)."""
+    if getattr(data, "whiten", None) is not None:
+        return data
+    s_n, n, c_n = np.shape(data.y)
+    return dataclasses.replace(data, whiten=np.broadcast_to(np.eye(c_n * n), (s_n, c_n * n, c_n * n)))
 
 
 def _inv_irradiance(data, m: np.ndarray) -> np.ndarray:

@@ -590,6 +590,11 @@ def texture_synthesize(model_path: Path, size: str, seed: int, iterations: int, 
 
 # --------------------------------------------------------------------------- diagnose: missing effects
 
+# pixels per channel the probe is binned to, with the texture carried or not. With it, each LM step whitens every
+# scanline by a dense (3 N)² matrix: 6,000 (a 320 × 240 capture binned to 56 × 98, the size the textured bench
+# measures at) keeps diagnose within 15 s warm; at 20,000 (112 × 195) it took 80 s.
+_DIAGNOSE_SAMPLES = {True: 6_000, False: 20_000}
+
 
 @main.command("diagnose")
 @click.argument("capture", type=click.Path(path_type=Path))
@@ -606,18 +611,20 @@ def texture_synthesize(model_path: Path, size: str, seed: int, iterations: int, 
 @click.option(
     "--max-samples",
     type=click.IntRange(100, 10_000_000),
-    default=20_000,
-    show_default=True,
-    help="Bin the probe to at most this many pixels per channel.",
+    default=None,
+    help=f"Bin the probe to at most this many pixels per channel [default: {_DIAGNOSE_SAMPLES[True]:,} with the "
+    f"texture carried, whose covariance costs (3 N)² per scanline of N values; {_DIAGNOSE_SAMPLES[False]:,} with "
+    "--no-texture].",
 )
 @click.option(
     "--texture/--no-texture",
-    default=False,
+    default=True,
     show_default=True,
-    help="Carry the probe's ρd texture in the model (a Gaussian process with its measured covariance along "
-    "the scanline and between channels; what neighbouring columns share discounts the evidence).",
+    help="Carry the probe's ρd texture in the model where the baseline's residuals show one (a Gaussian process "
+    "with its measured covariance along the scanline and between channels; what neighbouring columns share "
+    "discounts the evidence). Without it a textured probe's texture swamps every effect.",
 )
-def diagnose_cmd(capture: Path, out_dir: Path, max_steps: int, max_samples: int, texture: bool) -> None:
+def diagnose_cmd(capture: Path, out_dir: Path, max_steps: int, max_samples: int | None, texture: bool) -> None:
     """Find the effects a capture needs beyond the Ward model: report.json, report.md, residual plots."""
     from ..capture import CAPTURE_FILE, Capture, CaptureError, load_capture
     from ..effects import ScanlineModel, discover
@@ -630,7 +637,7 @@ def diagnose_cmd(capture: Path, out_dir: Path, max_steps: int, max_samples: int,
         cap = load_capture(capture)
         if not isinstance(cap, Capture):
             raise CaptureError(CAPTURE_FILE, "method", f"diagnose reads method = 'scanline', got {cap.method!r}")
-        data = capture_data(cap, max_samples=max_samples)
+        data = capture_data(cap, max_samples=_DIAGNOSE_SAMPLES[texture] if max_samples is None else max_samples)
         rep = discover(ScanlineModel(cap.config.fit.normalization), data, max_steps=max_steps, texture=texture)
         rep.save(out_dir, extra={"capture": cap.name})
     except (CaptureError, ValueError, OSError) as exc:
