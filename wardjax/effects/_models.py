@@ -355,6 +355,7 @@ def _whitened_design(data) -> jnp.ndarray:
 
 
 def _gls_design(W, inv_sp):
+    """ρd's whitened design ``(S, N, C, C_cols)``: column ``c`` is ``L⁻¹`` of ``inv_sp`` on channel ``c`` alone."""
     c_n = inv_sp.shape[-1]
     if W.ndim == 3:
         eye = jnp.eye(c_n, dtype=inv_sp.dtype)
@@ -398,13 +399,7 @@ def _gls_rho(W, inv_sp, resid):
     scanline.
     """
     if W.ndim == 3:
-        c_n = inv_sp.shape[-1]
-        eye = jnp.eye(c_n, dtype=inv_sp.dtype)
-        A = jnp.stack([_whiten(W, inv_sp * eye[c][None, None, :]) for c in range(c_n)], -1)  # (S, N, C, C_cols)
-        b = _whiten(W, resid)
-        AtA = jnp.einsum("snck,sncl->skl", A, A) + _TINY * eye[None]
-        Atb = jnp.einsum("snck,snc->sk", A, b)
-        return jnp.pi * jnp.linalg.solve(AtA, Atb[..., None])[..., 0][:, None, :]
+        return _gls_solve(_gls_design(W, inv_sp), _whiten(W, resid))
     a = _whiten(W, inv_sp)
     b = _whiten(W, resid)
     return jnp.pi * jnp.sum(a * b, axis=1, keepdims=True) / jnp.maximum(jnp.sum(a * a, axis=1, keepdims=True), _TINY)
