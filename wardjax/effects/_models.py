@@ -545,7 +545,7 @@ class ScanlineModel:
         if plain is None or plain is False:
             rho, f, z = general(None)
         else:
-            design = ctx["whitened_design"] if "whitened_design" in ctx else _whitened_design(data)
+            design = ctx["whitened_design"]  # set by context() whenever the data are whitened
 
             def direct(_):
                 # nothing between the model and the measured values: the residual is linear in ρd, so its
