@@ -300,6 +300,17 @@ def test_twin_signatures_reported_as_not_told_apart():
     assert alone.found == ["illumination_gradient"] and not alone.ambiguous
 
 
+def test_every_confusable_pair_says_what_would_tell_it_apart():
+    """The pairs the search may report as not told apart are symmetric, and the report has, for each, the
+    measurement that would separate them (report.md prints it: a pair without one would fail there)."""
+    from wardjax.effects._discover import _CONFUSABLE
+    from wardjax.effects._report import _SEPARATE
+
+    pairs = {frozenset({a, b}) for a, others in _CONFUSABLE.items() for b in others}
+    assert all(a in _CONFUSABLE[b] for a, others in _CONFUSABLE.items() for b in others)
+    assert pairs and pairs == set(_SEPARATE)
+
+
 def test_an_optional_parameter_must_pay_its_way():
     """The illumination field's tilt ``b_st`` is optional: on a pure ramp discovery adds the reduced form
     (``b_st`` held at 0, ``k = 1``, one ``ln N`` cheaper in ΔBIC); once the data carry a tilt as well, the

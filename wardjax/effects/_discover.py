@@ -84,11 +84,15 @@ _REFINE_ROUNDS = 11
 _AMBIGUOUS_BIC = 6.0  # a confusable runner-up within this ΔBIC of the winner is named too (Kass & Raftery: < 6)
 # effects whose signatures one capture may not tell apart: a lamp field follows image position, anisotropy the
 # half-vector azimuth, the Fresnel rise the incidence angle, and across one capture's scanlines they covary (on
-# textured captures the Fresnel rise, one parameter, took the ramp across the image)
+# textured captures the Fresnel rise, one parameter, took the ramp across the image); a camera response compresses
+# the highlight against each channel's diffuse floor, which a per-channel specular scale mimics (textured bench,
+# noise texture, codes^1.12: their ΔBIC 3.1 and 3.4 apart, the wrong one ahead)
 _CONFUSABLE = {
     "illumination_gradient": ("anisotropy", "fresnel"),
     "anisotropy": ("illumination_gradient",),
     "fresnel": ("illumination_gradient",),
+    "gamma": ("coloured_specular",),
+    "coloured_specular": ("gamma",),
 }
 _REFINE_BIC = 0.5  # ... a runner-up matters if its ΔBIC (a lower bound) is at least this fraction of the winner's
 

@@ -123,13 +123,14 @@ class Step:
     plot: dict | None = None
 
 
-# what would tell an effect from an illumination gradient (``report.ambiguous``)
+# what would tell apart two effects one capture could not (``report.ambiguous``)
 _SEPARATE = {
-    "anisotropy": "a second capture with the probe turned by 90° would: anisotropy turns with it, the "
-    "illumination does not",
-    "fresnel": "a second capture with the lamp higher or lower would: the Fresnel rise follows the incidence "
-    "angle, the illumination the image position",
-    "illumination_gradient": "a second capture with the probe turned by 90° or the lamp moved would",
+    frozenset({"illumination_gradient", "anisotropy"}): "a second capture with the probe turned by 90° would: "
+    "anisotropy turns with it, the illumination does not",
+    frozenset({"illumination_gradient", "fresnel"}): "a second capture with the lamp higher or lower would: the "
+    "Fresnel rise follows the incidence angle, the illumination the image position",
+    frozenset({"gamma", "coloured_specular"}): "a grey chart in the frame or a second exposure would: a camera "
+    "response bends every level, the diffuse floor too; a coloured specular scales the lobe alone",
 }
 
 
@@ -321,7 +322,7 @@ class DiscoveryReport:
             L.append("\n## Not told apart\n")
             L.extend(
                 f"- {a} or {b}: ΔBIC differs by {d:.1f} only; one capture cannot tell them apart "
-                f"({_SEPARATE[b if a == 'illumination_gradient' else a]})"
+                f"({_SEPARATE[frozenset({a, b})]})"
                 for a, b, d in self.ambiguous
             )
         L.append("\n## Unexplained structure\n")
