@@ -55,6 +55,7 @@ Guard against confident wrong names
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import math
 import time
@@ -109,6 +110,7 @@ class _View(NamedTuple):
     r: np.ndarray
     pred: np.ndarray
     covs: dict
+    rho: np.ndarray | None = None  # profiled ρd (S, 1, C) of a scanline model
 
 
 class _Search:
@@ -203,7 +205,7 @@ class _Search:
         """Whitened residuals, prediction and covariates of ``st``: what the structure tests and plots read."""
         act = np.array([i in st.active for i in range(len(self.testable))], bool)
         with jax.enable_x64(True):  # the parameters too: outside, jnp.asarray would round them to float32
-            r, pred, _ = _residual_view(
+            r, pred, rho = _residual_view(
                 jnp.asarray(st.u),
                 jnp.asarray(act),
                 self.data_dev,
@@ -212,7 +214,7 @@ class _Search:
                 layout_key=self.layout.key,
             )
         r, pred = np.asarray(r), np.asarray(pred)
-        return _View(st, r, pred, self.model.covariates(self.data, pred))
+        return _View(st, r, pred, self.model.covariates(self.data, pred), None if rho is None else np.asarray(rho))
 
 
 def _check_inputs(model, data, alpha: float) -> None:
@@ -299,7 +301,9 @@ def _candidate_jobs(search: _Search, cur: FitState, remaining: list[int]):
         e = testable[i]
         own = layout.slices[e.name]
         pinned = [j for j, p in zip(own, e.params) if p.optional]
-        forms = [own] + ([[j for j in own if j not in pinned]] if pinned else [])
+        reduced = [[j for j in own if j not in pinned]] if pinned else []
+        # textured (search.cross set), an optional parameter is held absent: see Param.optional
+        forms = ([own] if search.cross is None or not pinned else []) + reduced
         for form, free_e in enumerate(forms):
             for st in e.starts():
                 u0 = cur.u.copy()
@@ -375,14 +379,10 @@ def _continue_contenders(search: _Search, cur: FitState, remaining: list, fits: 
 
 
 def _deflated(search: _Search, cur: _View, cand: Candidate, state: FitState) -> Candidate:
-    """``cand`` with Δχ² divided by its design effect in ΔBIC and the p-value (:class:`CrossTexture`)."""
-    import dataclasses
-
-    assert search.cross is not None
-    new = search.residual_view(state)
-    deff = search.cross.design_effect(np.asarray(cur.r), np.asarray(new.r), np.asarray(new.pred))
+    """``cand`` with Δχ² deflated by the texture between scanlines in ΔBIC and the p-value (:class:`CrossTexture`)."""
+    new, cross = search.residual_view(state), search.cross
+    dchi2, deff = cross.deflate(cand.delta_chi2, cur.r, cur.state.chi2, new.r, state.chi2, new.pred)  # type: ignore[union-attr]
     e = next(t for t in search.testable if t.name == cand.effect)
-    dchi2 = cand.delta_chi2 / deff
     return dataclasses.replace(
         cand, delta_bic=dchi2 - cand.k * search.ln_n, p_value=_lr_p(dchi2, e, cand.k), design_effect=deff
     )
@@ -577,7 +577,7 @@ def _baseline(model, data, testable, lm_steps: int, chunk: int, texture: bool):
     carry = texture and model.kind == "scanline" and getattr(data, "kind", None) in ("ratio", "brdf")
     search = _Search(model, identity_whitened(data) if carry else data, testable, lm_steps, chunk)
     cur = search.residual_view(_fit_baseline(search))
-    textured = with_texture(data, cur.pred) if carry else None
+    textured = with_texture(data, cur.pred, cur.rho) if carry else None
     if carry and textured is None:  # no texture: the plain data (the identity costs a dense product per evaluation)
         search = _Search(model, data, testable, lm_steps, chunk)
     if textured is None:

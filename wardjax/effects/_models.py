@@ -85,6 +85,11 @@ class ScanlineData(eqx.Module):
         residuals along each scanline when the probe's ρd texture is carried
         in the model as a Gaussian process (:mod:`wardjax.effects._texture`);
         ``None``: white noise.
+    levels
+        ``(P, a)`` or ``None``: the texture between scanlines carried in their
+        diffuse levels (:mod:`~wardjax.effects._levels`); the residuals gain
+        ``P ℓ``, ``ℓ = ρd a`` the scanlines' relative levels (``P`` ``(n, S)``,
+        ``a`` ``(C,)``), ``n_levels`` (``n − 1``) more observations.
     """
 
     y: np.ndarray
@@ -95,6 +100,8 @@ class ScanlineData(eqx.Module):
     cov: dict
     censored: np.ndarray | None = None
     whiten: np.ndarray | None = None
+    levels: tuple | None = None
+    n_levels: int = eqx.field(static=True, default=0)
     kind: str = eqx.field(static=True, default="ratio")
     f_std: float = eqx.field(static=True, default=0.99 / np.pi)
     available: tuple = eqx.field(static=True, default=())
@@ -105,7 +112,7 @@ class ScanlineData(eqx.Module):
 
     @property
     def n_obs(self) -> int:
-        return int(np.sum(np.asarray(self.mask)))
+        return int(np.sum(np.asarray(self.mask))) + self.n_levels
 
 
 def scanline_data(
@@ -566,9 +573,13 @@ class ScanlineModel:
         return r, f, rho, cens
 
     def residuals(self, vals, active, effects, data, ctx=None):
+        """Whitened residuals, flat: the values' ``(S N C)``, then the scanline levels' (``data.levels``)."""
         ctx = self.context(data) if ctx is None else ctx
-        r, *_ = self._profile(vals, active, effects, data, ctx)
-        return r.reshape(-1)
+        r, _, rho, _ = self._profile(vals, active, effects, data, ctx)
+        if data.levels is None:
+            return r.reshape(-1)
+        P, a = data.levels
+        return jnp.concatenate([r.reshape(-1), P @ (rho[:, 0, :] @ a)])
 
     def predict(self, vals, active, effects, data):
         """Prediction of the measured values ``(S, N, C)``, profiled ρd ``(S, 1, C)``, censored mask."""

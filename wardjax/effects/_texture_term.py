@@ -14,6 +14,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from ._levels import level_whitening, relative_levels
 from ._noise import noise_columns
 from ._texture import (
     cross_covariance,
@@ -30,7 +31,7 @@ __all__ = ["CrossTexture", "identity_whitened", "white_noise_share", "with_textu
 _NOISE_FLOOR = 0.02  # white noise off the highlight at least this fraction of the texture variance
 
 
-def with_texture(data, pred: np.ndarray):
+def with_texture(data, pred: np.ndarray, rho: np.ndarray | None = None):
     """``data`` with the texture carried as a Gaussian process, a summary, and the texture the process leaves out.
 
     Returns ``(data, summary, CrossTexture)``. The white noise is re-estimated with the texture from the
@@ -41,6 +42,8 @@ def with_texture(data, pred: np.ndarray):
     (:func:`~wardjax.effects._texture.joint_autocovariance`), and the
     covariance between neighbouring scanlines and channels goes into each
     candidate's evidence as a design effect (:class:`CrossTexture`).
+    With the baseline's profiled ρd ``rho`` ``(S, 1, C)``, the texture between
+    scanlines in their diffuse levels is carried too (:mod:`~wardjax.effects._levels`).
     Returns ``None`` if no texture is found.
     """
     if getattr(data, "kind", None) not in ("ratio", "brdf") or data.y.shape[1] < 8:
@@ -71,11 +74,29 @@ def with_texture(data, pred: np.ndarray):
     W = texture_whitening(fit, sigma, exact)
     new = dataclasses.replace(data, sigma=sigma, whiten=W)
     mean_level = np.array([np.mean(pred[..., c][m[..., c]]) for c in range(c_n)])
-    summary = {
+    summary: dict = {
         "amplitude": [float(v) for v in np.sqrt(tex_var) / np.maximum(mean_level, 1e-30)],
         "rho": [float(fit.acov[c * n, c * n + 1] / max(tex_var[c], 1e-300)) for c in range(c_n)],
     }
-    return new, summary, CrossTexture(y, off, W, sigma, exact)
+    lv = _levels(data, rho, m)
+    if lv is None:
+        return new, summary, CrossTexture(y, off, W, sigma, exact)
+    new = dataclasses.replace(new, levels=lv[:2], n_levels=lv[2]["n"] - 1)
+    summary["levels"] = lv[2]
+    return new, summary, CrossTexture(y, off, W, sigma, exact, lv[2]["deff"])
+
+
+def _levels(data, rho: np.ndarray | None, m: np.ndarray):
+    """``(P, a, summary)`` of :func:`~wardjax.effects._levels.level_whitening` for the baseline's ρd, the trend
+    the scanline's mean field coordinate ``s̄`` (``None`` without ρd or the coordinate)."""
+    s = data.cov.get("illum_s")
+    if rho is None or s is None:
+        return None
+    seen = np.asarray(np.any(m, axis=-1), bool)  # (S, N)
+    ell, a, ok = relative_levels(rho, np.any(seen, axis=1))
+    s_bar = np.array([np.mean(np.asarray(s)[j][seen[j]]) if seen[j].any() else 0.0 for j in range(len(ell))])
+    out = level_whitening(ell, ok, s_bar)
+    return None if out is None else (out[0], a, out[1])
 
 
 def identity_whitened(data):
@@ -152,6 +173,7 @@ class CrossTexture(NamedTuple):
     whiten: np.ndarray  # (S, C N, C N): the channels of a scanline whitened together
     sigma: np.ndarray  # (S, N, C)
     use: np.ndarray  # (S, N, C)
+    level_deff: float = 1.0  # the scanline levels' own inflation (wardjax.effects._levels)
 
     def design_effect(self, r_cur: np.ndarray, r_new: np.ndarray, pred_new: np.ndarray) -> float:
         """The design effect of a candidate that moves the whitened residuals from ``r_cur`` to ``r_new``.
@@ -167,3 +189,19 @@ class CrossTexture(NamedTuple):
         d = (r_cur - r_new).reshape(self.sigma.shape)
         cross = cross_covariance(self.y - pred_new, self.off)
         return design_effect(d, self.whiten, self.sigma, self.use, cross)
+
+    def deflate(self, dchi2: float, r_cur, chi2_cur: float, r_new, chi2_new: float, pred_new) -> tuple[float, float]:
+        """A candidate's Δχ² with its share in the values divided by :meth:`design_effect`, and that effect.
+
+        ``r_*`` are the values' whitened residuals, ``chi2_*`` the whole χ²:
+        what they differ by is the scanline levels' share
+        (:mod:`~wardjax.effects._levels`), which has its own covariance
+        between scanlines and is divided by its own inflation,
+        ``level_deff``, instead. A share that got worse is not shrunk.
+        """
+        r_cur, r_new = np.asarray(r_cur), np.asarray(r_new)
+        deff = self.design_effect(r_cur, r_new, np.asarray(pred_new))
+        d_lv = (chi2_cur - float(np.sum(r_cur**2))) - (chi2_new - float(np.sum(r_new**2)))
+        d_px = dchi2 - d_lv
+        d_lv = d_lv / self.level_deff if d_lv > 0 else d_lv
+        return max((d_px / deff if d_px > 0 else d_px) + d_lv, 0.0), deff
