@@ -204,3 +204,33 @@ def test_camera_response_and_coloured_specular_reported_as_not_told_apart(tmp_pa
     (other,) = pair - {rep.found[0]}
     assert (rep.found[0], other) in [(a, b) for a, b, _ in rep.ambiguous], rep.ambiguous
     assert "a camera response bends every level" in rep.to_markdown()
+
+
+@pytest.mark.slow  # one discovery on a textured capture: a minute on two cores
+def test_ramp_on_wood_named_from_the_scanline_levels(tmp_path):
+    """Wood 10 % (the textured bench's capture, seed 0), a weak ramp ``1 + 0.12 s`` across the lit frame's columns
+    (edited through the image codec): the lobe alone gave it Δχ² ≈ 6 against the wood grain, and it was not named.
+    The scanlines' diffuse levels carry it (:mod:`wardjax.effects._levels`): named first, with ``b`` near ``g``."""
+    from benchmarks.edited_captures import diagnose_folder, edit_capture, make_capture
+
+    make_capture(tmp_path / "base", texture="wood", size=(160, 120), seed=0, texture_amplitude=0.1)
+    edit_capture(tmp_path / "base", tmp_path / "case", "gradient", 0.12)
+    rep = diagnose_folder(tmp_path / "case", texture=True)
+    assert rep.settings["texture"]["levels"]["n"] > 40
+    assert rep.found[:1] == ["illumination_gradient"], (rep.found, rep.gap, rep.partial)
+    st = rep.steps[0]
+    assert "b_st" not in st.params or st.params["b_st"] == 0.0  # the tilt is held absent on a textured probe
+    assert abs(st.params["b"] - 0.12) < 3 * st.stderr["b"] + 0.03, (st.params, st.stderr)
+
+
+@pytest.mark.slow  # one discovery on a textured capture: a minute on two cores
+def test_untouched_marble_not_named_a_ramp(tmp_path):
+    """Marble 10 %, seed 1, nothing edited: its veins, coherent over many columns, read as a tilted illumination
+    field (``b_st`` 0.115, Δχ² 29) until the tilt was held absent on textured probes; the scanline levels'
+    own trend (slope 0.10 ± 0.07 in ``log ρd`` against ``s̄``) does not name a ramp either."""
+    from benchmarks.edited_captures import diagnose_folder, make_capture
+
+    make_capture(tmp_path / "base", texture="marble", size=(160, 120), seed=1, texture_amplitude=0.1)
+    rep = diagnose_folder(tmp_path / "base", texture=True)
+    assert rep.settings["texture"] is not None and "levels" in rep.settings["texture"]
+    assert rep.found == [], (rep.found, rep.gap)

