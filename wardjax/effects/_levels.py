@@ -1,4 +1,4 @@
-"""The texture between scanlines, in the scanlines' diffuse levels: their log ρd as a Gaussian process.
+"""The texture between scanlines, in the scanlines' diffuse levels: their relative ρd as a Gaussian process.
 
 Why (measured, see docs/missing-effects.md)
     The scanline model profiles ρd per scanline and channel, so anything that
@@ -30,6 +30,17 @@ Estimating ``C`` (restricted maximum likelihood)
     profiled, ``(ρ, λ)`` the best of a grid (Patterson & Thompson 1971).
     The trend is removed only for the estimate; the whitening profiles the
     mean alone, so a ramp still costs χ² until an effect explains it.
+
+    From ~55 levels the estimate is uncertain exactly where a trend lives
+    (long-range correlation), and a trend's Δχ² under it is heavier-tailed
+    than χ²₁ (at ρ 0.93, Δχ² > 9.6 in 5.5 % of trend-free series, not
+    0.2 %). ``deff`` (in the summary) is the 95 % point of that statistic
+    over series drawn from the estimated ``C``, each with ``C`` re-estimated
+    (a parametric bootstrap), over χ²₁'s; discovery divides the levels'
+    share of a candidate's Δχ² by it
+    (:meth:`~wardjax.effects._texture_term.CrossTexture.deflate`). It helps
+    but does not fully calibrate: the 5 % test still rejects 5–9 % at ρ
+    0.85 and 10 % at 0.93 (``tests/test_levels.py``).
 """
 
 from __future__ import annotations
