@@ -88,8 +88,9 @@ class ScanlineData(eqx.Module):
     levels
         ``(P, a)`` or ``None``: the texture between scanlines carried in their
         diffuse levels (:mod:`~wardjax.effects._levels`); the residuals gain
-        ``P ℓ``, ``ℓ = ρd a`` the scanlines' relative levels (``P`` ``(n, S)``,
-        ``a`` ``(C,)``), ``n_levels`` (``n − 1``) more observations.
+        ``P ℓ``, ``ℓ = ρd a`` the scanlines' relative levels (``P`` ``(S, S)``,
+        ``n`` non-zero rows of rank ``n − 1``: that many more observations;
+        ``a`` ``(C,)``). All zeros: the same compiled program, no term.
     """
 
     y: np.ndarray
@@ -101,7 +102,6 @@ class ScanlineData(eqx.Module):
     censored: np.ndarray | None = None
     whiten: np.ndarray | None = None
     levels: tuple | None = None
-    n_levels: int = eqx.field(static=True, default=0)
     kind: str = eqx.field(static=True, default="ratio")
     f_std: float = eqx.field(static=True, default=0.99 / np.pi)
     available: tuple = eqx.field(static=True, default=())
@@ -112,7 +112,8 @@ class ScanlineData(eqx.Module):
 
     @property
     def n_obs(self) -> int:
-        return int(np.sum(np.asarray(self.mask))) + self.n_levels
+        rows = 0 if self.levels is None else int(np.sum(np.any(np.asarray(self.levels[0]) != 0, axis=1)))
+        return int(np.sum(np.asarray(self.mask))) + max(rows - 1, 0)
 
 
 def scanline_data(

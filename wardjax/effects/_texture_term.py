@@ -79,11 +79,18 @@ def with_texture(data, pred: np.ndarray, rho: np.ndarray | None = None):
         "rho": [float(fit.acov[c * n, c * n + 1] / max(tex_var[c], 1e-300)) for c in range(c_n)],
     }
     lv = _levels(data, rho, m)
-    if lv is None:
-        return new, summary, CrossTexture(y, off, W, sigma, exact)
-    new = dataclasses.replace(new, levels=lv[:2], n_levels=lv[2]["n"] - 1)
+    if lv is None:  # no term, in the layout that has one (one compiled program for every fit of the run)
+        return dataclasses.replace(new, levels=_no_levels(data)), summary, CrossTexture(y, off, W, sigma, exact)
+    P = np.zeros((y.shape[0], y.shape[0]))
+    P[: lv[0].shape[0]] = lv[0]
     summary["levels"] = lv[2]
-    return new, summary, CrossTexture(y, off, W, sigma, exact, lv[2]["deff"])
+    return dataclasses.replace(new, levels=(P, lv[1])), summary, CrossTexture(y, off, W, sigma, exact, lv[2]["deff"])
+
+
+def _no_levels(data) -> tuple[np.ndarray, np.ndarray]:
+    """The scanline levels' term with nothing in it: ``P = 0`` ``(S, S)``, ``a = 0`` ``(C,)``."""
+    s_n, _, c_n = np.shape(data.y)
+    return np.zeros((s_n, s_n)), np.zeros(c_n)
 
 
 def _levels(data, rho: np.ndarray | None, m: np.ndarray):
@@ -105,7 +112,8 @@ def identity_whitened(data):
     if getattr(data, "whiten", None) is not None:
         return data
     s_n, n, c_n = np.shape(data.y)
-    return dataclasses.replace(data, whiten=np.broadcast_to(np.eye(c_n * n), (s_n, c_n * n, c_n * n)))
+    eye = np.broadcast_to(np.eye(c_n * n), (s_n, c_n * n, c_n * n))
+    return dataclasses.replace(data, whiten=eye, levels=_no_levels(data))
 
 
 def _inv_irradiance(data, m: np.ndarray) -> np.ndarray:
