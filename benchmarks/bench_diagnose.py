@@ -28,6 +28,7 @@ Run alone: ``python -m benchmarks.bench_diagnose [--size 320 240] [--textures wo
 from __future__ import annotations
 
 import argparse
+import functools
 import json
 import os
 import resource
@@ -72,6 +73,17 @@ def _found(report_dir: Path) -> str:
     rep = json.loads((report_dir / "report.json").read_text())
     names = ", ".join(rep["found"]) or "nothing"
     return f"{names}; gap " + " → ".join(f"{g:.3f}" for g in rep["gap"])
+
+
+def _commit() -> str:
+    """The checkout's short commit (``+`` if it has uncommitted changes), or ``"unknown"`` outside git."""
+    try:
+        run = functools.partial(subprocess.run, capture_output=True, text=True, check=True, cwd=Path(__file__).parent)
+        head = run(["git", "rev-parse", "--short", "HEAD"]).stdout.strip()
+        dirty = run(["git", "status", "--porcelain", "--untracked-files=no"]).stdout.strip()
+        return head + ("+" if dirty else "")
+    except (OSError, subprocess.CalledProcessError):
+        return "unknown"
 
 
 def main(argv=None) -> dict:
@@ -128,6 +140,7 @@ def main(argv=None) -> dict:
             on = "on" if term else "off"
             print(f"target {state}, texture term {on}: ≤ {lim:.0f} s; slowest {worst:.1f} s ({verdict})")
     out = {"size": list(a.size), "rows": rows, "before": {f"{k[0]}/{k[1]}": v for k, v in BEFORE["runs"].items()}}
+    out |= {"commit": _commit(), "date": time.strftime("%Y-%m-%d"), "cpus": os.cpu_count()}  # what ran, where
     if a.json:
         Path(a.json).write_text(json.dumps(out, indent=2))
     return out
