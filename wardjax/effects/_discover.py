@@ -69,7 +69,7 @@ from scipy.special import ndtr  # the normal tail: scipy.stats's own kernel, ~1 
 
 from ._effect import Effect, Param
 from ._evidence import _NOISE_Z, _gap_p, _lr_p, _within_noise
-from ._library import library
+from ._inputs import _check_inputs, _split_library
 from ._report import Candidate, DiscoveryReport, FitState, Step
 from ._solve import _cov_full, _fit_batch, _Layout, _residual_view
 from ._structure import _binned_test
@@ -215,42 +215,6 @@ class _Search:
             )
         r, pred = np.asarray(r), np.asarray(pred)
         return _View(st, r, pred, self.model.covariates(self.data, pred), None if rho is None else np.asarray(rho))
-
-
-def _check_inputs(model, data, alpha: float) -> None:
-    """Reject a model without the interface ``discover`` uses, data of another kind, or a level outside (0, 1).
-
-    Checked up front so that a mismatch fails with a clear message instead of
-    deep inside a traced solve.
-    """
-    api = ("kind", "data_kinds", "library_kind", "supports", "base_params", "residuals", "predict", "covariates")
-    for attr in api + ("n_profiled",):
-        if not hasattr(model, attr):
-            raise TypeError(f"model must provide {attr!r} (a ScanlineModel or ThresholdModel), got {type(model)!r}")
-    if getattr(data, "kind", None) not in model.data_kinds:
-        raise TypeError(f"data of kind {getattr(data, 'kind', type(data))!r} do not suit a {model.kind} model")
-    if not 0 < alpha < 1:
-        raise ValueError(f"alpha must be in (0, 1), got {alpha}")
-
-
-def _split_library(model, data, effects):
-    """The candidate effects that ``data`` can test, and ``(name, why, cancels_by_symmetry)`` of the others.
-
-    Effects of another model kind are dropped silently; those the data cannot
-    test are kept aside so that the report can say why they were not tried.
-    """
-    lib = library(model.library_kind) if effects is None else tuple(effects)
-    supports = model.supports  # a model may take another kind's effects (the screen model: scanline ones)
-    testable, skipped = [], []
-    for e in lib:
-        if not supports(e):
-            continue
-        why = e.applicable(data)
-        if why is None:
-            testable.append(e)
-        else:
-            skipped.append((e.name, why, e.cancels_by_symmetry))
-    return tuple(testable), skipped
 
 
 def _baseline_jobs(layout: _Layout, base: tuple[Param, ...]):
