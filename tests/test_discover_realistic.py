@@ -234,3 +234,27 @@ def test_untouched_marble_not_named_a_ramp(tmp_path):
     rep = diagnose_folder(tmp_path / "base", texture=True)
     assert rep.settings["texture"] is not None and "levels" in rep.settings["texture"]
     assert rep.found == [], (rep.found, rep.gap)
+
+
+def test_gamma_is_the_ratio_power_a_tone_curve_on_the_codes_gives(tmp_path):
+    """A camera response edited into a capture's lit codes, ``c ↦ c^1.12`` on sRGB codes (standard and probe in
+    one frame), is the library's γ on the ratio, ``f_std (f/f_std)^{1+ε}``: on 16-bit files what the fit
+    ``log f₁ = a + b log f₀`` leaves is a few hundredths of the noise σ, with ``a = −ε log f_std``. On 8-bit
+    files the rewrite adds banding — a rounding error shared by neighbouring pixels and channels, not white —
+    which is what the textured bench's 8-bit response edit carries besides the response."""
+    from benchmarks.edited_captures import edit_capture, make_capture
+    from benchmarks.requantisation import gamma_residual, rounding_error
+
+    out = {}
+    for bits in (8, 16):
+        base, edited = tmp_path / f"b{bits}", tmp_path / f"e{bits}"
+        make_capture(base, texture="noise", size=(96, 72), seed=1, texture_amplitude=0.1, bit_depth=bits)
+        edit_capture(base, edited, "response", 1.12)
+        out[bits] = rounding_error(base, edited, 1.12, bits), gamma_residual(base, edited)
+    q16, g16 = out[16]
+    assert g16["rms_sigma"] < 0.1 and g16["rms_sigma_library"] < 0.1, g16
+    assert abs(g16["b"] - 1.12) < 0.01 and abs(g16["a"] - g16["a_expected"]) < 0.005, g16
+    assert abs(q16["lag1_row"]) < 0.05 and abs(q16["channels"]) < 0.05, q16
+    q8, g8 = out[8]
+    assert q8["lag1_row"] > 0.3 and q8["lag1_col"] > 0.3 and q8["channels"] > 0.2, q8
+    assert g8["rms_sigma"] > 2 * g16["rms_sigma"], (g8, g16)
