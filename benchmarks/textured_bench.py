@@ -40,7 +40,14 @@ anisotropy confusion, and writes ``textured_bench_confusion.csv``.
 The cases run in rounds (strength × amplitude × seed), each round every
 texture × case, so a run stopped early is still balanced across cases.
 
-Run ``python -m benchmarks.textured_bench [--size 160 120] [--seeds 0 1] [--limit N]``
+The captures' image files are 8-bit by default, as ``wardjax simulate``
+writes them; ``--bit-depth 16`` writes 16-bit files, on which an edit's
+re-encoding adds no banding of its own (``benchmarks/requantisation.py``:
+on 8-bit files the response edit's rounding is shared by neighbouring
+pixels and channels). The 16-bit run is kept beside the 8-bit one, in
+``textured_bench_16bit.csv``.
+
+Run ``python -m benchmarks.textured_bench [--size 160 120] [--seeds 0 1] [--bit-depth 8|16] [--limit N]``
 or ``python -m benchmarks.textured_bench --summary``.
 """
 
@@ -119,22 +126,22 @@ def cases(seeds=(0,), strengths=("strong", "weak"), only=None):
             yield seed, strength, amp, tex, name
 
 
-def _base(tmp: Path, tex: str, amp: float, seed: int, size, eta: float = 0.0) -> Path:
-    """The capture an edit starts from (made once per texture, amplitude, seed and η)."""
-    folder = tmp / f"base_{tex}_{amp}_{seed}_{eta}"
+def _base(tmp: Path, tex: str, amp: float, seed: int, size, eta: float = 0.0, bits: int = 8) -> Path:
+    """The capture an edit starts from (made once per texture, amplitude, seed, η and bit depth)."""
+    folder = tmp / f"base_{tex}_{amp}_{seed}_{eta}_{bits}"
     if not (folder / "capture.toml").exists():
-        make_capture(folder, texture=tex, size=size, seed=seed, eta=eta, texture_amplitude=amp)
+        make_capture(folder, texture=tex, size=size, seed=seed, eta=eta, texture_amplitude=amp, bit_depth=bits)
     return folder
 
 
-def run_case(tmp: Path, seed: int, strength: str, amp: float, tex: str, name: str, size) -> dict:
+def run_case(tmp: Path, seed: int, strength: str, amp: float, tex: str, name: str, size, bits: int = 8) -> dict:
     """Make, edit and diagnose one case; the CSV row."""
     kind, amounts = CASES[name]
     amount = amounts[0 if strength == "weak" else 1]
     eta = amount if name == "anisotropy" else 0.0
     # the null cases have no strength: their second round is another capture
     cap_seed = seed + 1000 if name in NULL and strength == "weak" else seed
-    base = _base(tmp, tex, amp, cap_seed, size, eta)
+    base = _base(tmp, tex, amp, cap_seed, size, eta, bits)
     folder = tmp / "case"
     if folder.exists():
         shutil.rmtree(folder)
@@ -152,6 +159,7 @@ def run_case(tmp: Path, seed: int, strength: str, amp: float, tex: str, name: st
         "amount": amount,
         "seed": seed,
         "size": f"{size[0]}x{size[1]}",
+        "bits": bits,
         "expected": "(outside)" if EXPECTED[name] is None else EXPECTED[name],
         "found": "+".join(rep.found),
         "first": first,
@@ -256,6 +264,7 @@ def main(argv=None) -> None:
     ap.add_argument("--seeds", nargs="+", type=int, default=[0])
     ap.add_argument("--strengths", nargs="+", default=["strong", "weak"])
     ap.add_argument("--cases", nargs="+", default=None)
+    ap.add_argument("--bit-depth", type=int, default=8, choices=(8, 16), help="of the captures' image files")
     ap.add_argument("--limit", type=int, default=None, help="stop after this many cases")
     ap.add_argument("--out", type=Path, default=RESULTS / "textured_bench.csv")
     ap.add_argument("--append", action="store_true", help="keep the rows already in --out")
@@ -268,7 +277,7 @@ def main(argv=None) -> None:
         todo = [c for c in cases(a.seeds, a.strengths, a.cases) if _key(c) not in done][: a.limit]
         with tempfile.TemporaryDirectory() as tmp:
             for i, (seed, strength, amp, tex, name) in enumerate(todo):
-                row = run_case(Path(tmp), seed, strength, amp, tex, name, tuple(a.size))
+                row = run_case(Path(tmp), seed, strength, amp, tex, name, tuple(a.size), a.bit_depth)
                 rows.append(row)
                 _write(rows, a.out)
                 print(
