@@ -105,6 +105,7 @@ FIELDS = (
     "amount",
     "seed",
     "size",
+    "bits",
     "expected",
     "found",
     "first",
@@ -187,7 +188,8 @@ def _key(case) -> tuple:
 
 def _write(rows: list[dict], path: Path) -> None:
     buf = io.StringIO()
-    w = csv.DictWriter(buf, fieldnames=list(rows[0]) if rows else list(FIELDS), lineterminator="\n")
+    names = list(dict.fromkeys(k for r in rows for k in r)) if rows else list(FIELDS)  # rows of older runs: no bits
+    w = csv.DictWriter(buf, fieldnames=names, restval="", lineterminator="\n")
     w.writeheader()
     w.writerows(rows)
     write_bytes_atomic(path, buf.getvalue().encode())
@@ -272,7 +274,12 @@ def main(argv=None) -> None:
     a = ap.parse_args(argv)
     rows = _read(a.out) if (a.summary or a.append) and a.out.exists() else []
     if not a.summary:
-        rows = [r for r in rows if float(r["amount"]) == _amount(r["case"], r["strength"])]  # stale edits out
+        # stale edits, and rows of another bit depth (older rows: 8-bit), out
+        rows = [
+            r
+            for r in rows
+            if float(r["amount"]) == _amount(r["case"], r["strength"]) and int(r.get("bits") or 8) == a.bit_depth
+        ]
         done = {_key(r) for r in rows}
         todo = [c for c in cases(a.seeds, a.strengths, a.cases) if _key(c) not in done][: a.limit]
         with tempfile.TemporaryDirectory() as tmp:
