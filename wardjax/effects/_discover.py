@@ -345,7 +345,8 @@ def _continue_contenders(search: _Search, cur: FitState, remaining: list, fits: 
 def _deflated(search: _Search, cur: _View, cand: Candidate, state: FitState) -> Candidate:
     """``cand`` with Δχ² deflated by the texture between scanlines in ΔBIC and the p-value (:class:`CrossTexture`)."""
     new, cross = search.residual_view(state), search.cross
-    dchi2, deff = cross.deflate(cand.delta_chi2, cur.r, cur.state.chi2, new.r, state.chi2, new.pred)  # type: ignore[union-attr]
+    assert cross is not None  # called only where the texture is carried (_rank_candidates)
+    dchi2, deff = cross.deflate(cand.delta_chi2, cur.r, cur.state.chi2, new.r, state.chi2, new.pred)
     e = next(t for t in search.testable if t.name == cand.effect)
     return dataclasses.replace(
         cand, delta_bic=dchi2 - cand.k * search.ln_n, p_value=_lr_p(dchi2, e, cand.k), design_effect=deff
