@@ -6,6 +6,8 @@ import json
 import numpy as np
 import pytest
 from click.testing import CliRunner
+from hypothesis import given, settings
+from hypothesis import strategies as hst
 
 import wardjax as wj
 from benchmarks import hidden_effects as bench
@@ -335,3 +337,39 @@ def test_an_optional_parameter_must_pay_its_way():
     assert tilted.found == ["illumination_gradient"] and st2.evidence.k == 2
     assert abs(st2.params["b_st"] - k) < 3 * st2.stderr["b_st"] + 0.05 * abs(k), (st2.params, st2.stderr, k)
     assert abs(st2.params["b"] - st.params["b"]) < 3 * st2.stderr["b"]
+
+
+def _cand(name, dchi2, dbic, k):
+    from wardjax.effects._report import Candidate
+
+    return Candidate(name, k, dchi2, dbic, 1e-6, 0.5, 1.0, True)
+
+
+def test_a_candidate_that_fits_better_with_fewer_parameters_leads():
+    """Deflated one by one (each Δχ² by its own design effect), a candidate can trail one it dominates; between
+    the two, their own deviance difference decides, and it favours the dominant one for every design effect."""
+    from wardjax.effects._evidence import _dominant_first
+
+    scale, gamma, ramp = _cand("scale", 1055, 594, 2), _cand("gamma", 1123, 558, 1), _cand("ramp", 21, 8, 1)
+    assert [c.effect for c in _dominant_first([scale, gamma, ramp])] == ["gamma", "scale", "ramp"]
+    # no more parameters but a smaller Δχ²; more parameters; or no support of its own: the order stands
+    for other in (_cand("a", 1000, 500, 1), _cand("b", 1200, 500, 3), _cand("c", 1200, -1.0, 1)):
+        assert [c.effect for c in _dominant_first([scale, other])] == ["scale", other.effect]
+
+
+@settings(max_examples=300, deadline=None)
+@given(hst.lists(hst.tuples(hst.floats(0, 500), hst.floats(-20, 300), hst.integers(1, 4)), min_size=1, max_size=8))
+def test_the_leader_is_never_dominated_by_a_supported_candidate(rows):
+    """Whatever the evidence, the reordering keeps every candidate, and no supported candidate (ΔBIC > 0) lowers
+    χ² at least as much as the leader with no more parameters (one of the two strictly)."""
+    from wardjax.effects._evidence import _dominant_first
+
+    cands = sorted((_cand(str(i), *r) for i, r in enumerate(rows)), key=lambda c: -c.delta_bic)
+    out = _dominant_first(cands)
+    assert sorted(c.effect for c in out) == sorted(c.effect for c in cands)
+    lead = out[0]
+    for c in out[1:]:
+        dominates = (
+            c.delta_chi2 >= lead.delta_chi2 and c.k <= lead.k and (c.delta_chi2, -c.k) != (lead.delta_chi2, -lead.k)
+        )
+        assert not (c.delta_bic > 0 and dominates), (lead, c)

@@ -22,7 +22,10 @@ Evidence: why BIC *and* a boundary-corrected likelihood ratio
     ``ΔBIC = Δχ² − k ln N``, ``−½ΔBIC`` approximating the log Bayes factor
     against the current model (unit-information prior); the winner is the
     candidate with the largest ΔBIC, so an effect with more parameters must
-    buy its extra freedom — never the largest raw drop. BIC's penalty grows
+    buy its extra freedom — never the largest raw drop. With the texture carried
+    each Δχ² is divided by its own design effect, and a candidate that lowers
+    χ² at least as much with no more parameters is put ahead of the leader
+    (``_evidence._dominant_first``). BIC's penalty grows
     with ``N``, which is what keeps false additions rare on the large
     scanline problems (``N`` ≈ 10⁴: a one-parameter effect needs
     ``Δχ² > 9.2``). On small problems (Table 1: ``N = 16``) BIC alone is
@@ -68,7 +71,7 @@ import numpy as np
 from scipy.special import ndtr  # the normal tail: scipy.stats's own kernel, ~1 s less import
 
 from ._effect import Effect, Param
-from ._evidence import _NOISE_Z, _gap_p, _lr_p, _within_noise
+from ._evidence import _NOISE_Z, _dominant_first, _gap_p, _lr_p, _within_noise
 from ._inputs import _check_inputs, _split_library
 from ._report import Candidate, DiscoveryReport, FitState, Step
 from ._solve import _cov_full, _fit_batch, _Layout, _residual_view
@@ -395,7 +398,7 @@ def _rank_candidates(search: _Search, cur: _View, remaining: list[int]):
     evidence = {i: evidence[key] for i, key in best.items()}
     cands = list(evidence.values())
     cands.sort(key=lambda c: -c.delta_bic)
-    return cands, by_effect
+    return _dominant_first(cands), by_effect
 
 
 def _plot_sampler(mask, n_flat: int, seed: int):
