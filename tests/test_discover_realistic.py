@@ -222,6 +222,9 @@ def test_camera_response_named_over_a_specular_scale_it_fits_better_with_fewer_p
     win = rep.steps[0].evidence
     scale = next(c for c in rep.steps[0].candidates if c.effect == "coloured_specular")
     assert win.delta_chi2 > scale.delta_chi2 and win.k < scale.k
+    assert ("gamma", "coloured_specular") in [(a, b) for a, b, _ in rep.ambiguous], rep.ambiguous
+    assert scale.delta_bic > win.delta_bic  # deflated one by one, the scale leads: what this capture is about
+    assert "but gamma lowers χ² at least as much with no more parameters" in rep.to_markdown()
     assert rep.gap[-1] < 1.02, rep.gap
     assert abs(rep.steps[0].params["eps"] - 0.12) < 3 * rep.steps[0].stderr["eps"] + 0.02, rep.steps[0].params
 

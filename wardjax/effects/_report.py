@@ -151,6 +151,16 @@ def _fmt(v: float, s: float) -> str:
     return f"{v:.4g} ± {s:.2g}"
 
 
+def _ambiguity(named: str, other: str, d: float) -> str:
+    """How far apart two effects one capture did not tell apart were: ``d`` is ``ΔBIC(named) − ΔBIC(other)``."""
+    if d >= 0:
+        return f"ΔBIC differs by {d:.1f} only"
+    return (
+        f"{other}'s ΔBIC is {-d:.1f} higher, each deflated by its own design effect, but {named} lowers χ² "
+        "at least as much with no more parameters"
+    )
+
+
 @dataclasses.dataclass(frozen=True, eq=False)
 class DiscoveryReport:
     """What :func:`~wardjax.effects.discover` found.
@@ -180,7 +190,9 @@ class DiscoveryReport:
         ``(named, other, ΔBIC difference)`` where an effect with a different
         signature explained the step almost as well (illumination
         non-uniformity against anisotropy): one capture cannot tell them
-        apart, and both are named.
+        apart, and both are named. The difference is negative where the
+        named effect lowers χ² at least as much with no more parameters but
+        its own design effect deflated it more.
     """
 
     model: str
@@ -321,7 +333,7 @@ class DiscoveryReport:
         if self.ambiguous:
             L.append("\n## Not told apart\n")
             L.extend(
-                f"- {a} or {b}: ΔBIC differs by {d:.1f} only; one capture cannot tell them apart "
+                f"- {a} or {b}: {_ambiguity(a, b, d)}; one capture cannot tell them apart "
                 f"({_SEPARATE[frozenset({a, b})]})"
                 for a, b, d in self.ambiguous
             )
