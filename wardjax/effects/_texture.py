@@ -93,9 +93,6 @@ __all__ = [
 
 _F_MIN = 30.0
 _LAGS = (1, 2, 3, 4, 6, 8, 12, 16)
-# the Hann window on the lags along a scanline, a fraction of half a scanline: measured on the 36 untouched
-# captures of the textured bench (docs/missing-effects.md)
-_LAG_WINDOW = 0.5
 _CROSS_SCANLINES = 8  # scanline lags of the cross-covariance (the design effect); sample lags: half a scanline
 _RHO_GRID = np.concatenate([np.linspace(0.0, 0.9, 19), [0.92, 0.94, 0.96, 0.97, 0.98, 0.985, 0.99, 0.995]])
 
@@ -265,15 +262,16 @@ def joint_autocovariance(
 ) -> tuple[np.ndarray, np.ndarray]:
     """The texture's covariance along one scanline, between all channels, ``(C N, C N)``, measured off the highlight.
 
-    Entry ``(c N + i, c' N + j)`` is ``c_{cc'}(j − i)``
-    (:func:`lag_covariances`: the variance about each scanline's mean at
-    lag 0, less the cross-variogram at the other lags; white noise adds
+    Entry ``(c N + i, c' N + j)`` is ``c_{cc'}(j − i) = ⟨ē_{i,c} ē_{j,c'}⟩``,
+    the product of residuals about each scanline's mean (white noise adds
     nothing off the diagonal), the diagonal ``c = c', i = j`` less the white
-    noise, every lag tapered by a Hann window of a quarter of the scanline
-    (``_LAG_WINDOW``), the whole made positive semi-definite (negative
-    eigenvalues set to 0). A constant added to a channel pair's covariance
-    does not change the fit, since ρd per scanline and channel is a free
-    constant (generalised least squares with an intercept).
+    noise, every lag tapered by a Hann
+    window of half the scanline, the whole made positive semi-definite
+    (negative eigenvalues set to 0). Removing each scanline's mean biases
+    every entry by about the same constant per channel pair; a constant added
+    to a channel's covariance does not change the fit, since ρd per scanline
+    and channel is a free constant (generalised least squares with an
+    intercept).
 
     The white noise is ``noise_var`` (from :func:`estimate_texture`) but at
     most ``c_cc(0) − c_cc(1)``: the drop from lag 0 to lag 1 is noise plus
@@ -297,41 +295,18 @@ def joint_autocovariance(
 
 
 def lag_covariances(e: np.ndarray, off: np.ndarray) -> np.ndarray:
-    """The texture's covariance between channels at each lag along a scanline, off the highlight, ``(C, C, 2 H + 1)``
-    for ``|m| ≤ H`` (``H`` half a scanline): what :func:`joint_autocovariance` assembles, independent of the noise.
-
-    Lag 0 is ``⟨ē_{i,c} ē_{i,c'}⟩``, the products about each scanline's mean
-    (the level ρd leaves); lag ``m ≠ 0`` is that less the cross-variogram,
-    ``½ ⟨(e_{i+m,c} − e_{i,c})(e_{i+m,c'} − e_{i,c'})⟩``, which no mean
-    enters. The products about the mean at lag ``m`` were measured first;
-    their bias, ``−2/n Σ_j c(i − j) + 1/n² Σ_jk c(j − k)`` for a scanline of
-    ``n`` values, is one constant only where the ``n`` values are contiguous:
-    off the highlight they are two runs on either side of it, and the bias
-    then changes with the lag. On textures smooth along the scanline (the
-    simulated wood, correlated over tens of samples) that bent the measured
-    covariance at long lags: the 36 untouched captures of the textured bench
-    read gaps of 0.979 ± 0.026 (10 % wood 1.018 ± 0.030, up to 1.050); with
-    the variogram and a quarter-scanline window 0.987 ± 0.020 (wood
-    0.999 ± 0.025). Windows of 0.35 and 0.7 of half a scanline read
-    0.987 ± 0.021 and 0.989 ± 0.025 (docs/missing-effects.md).
-    """
+    """``⟨ē_{i,c} ē_{i+m,c'}⟩`` off the highlight about each scanline's mean, ``(C, C, 2 H + 1)`` for ``|m| ≤ H``
+    (``H`` half a scanline): what :func:`joint_autocovariance` assembles, independent of the noise."""
     s_n, n, c_n = e.shape
+    eo = _centred(e, off)
     half = max(n // 2, 2)
     out = np.zeros((c_n, c_n, 2 * half + 1))
-    eo = _centred(e, off)
     for c in range(c_n):
         for c2 in range(c_n):
-            p = eo[..., c] * eo[..., c2]
-            p = p[np.isfinite(p)]
-            out[c, c2, half] = float(np.mean(p)) if p.size > 4 * n else 0.0
-    raw = np.where(off, e, np.nan)
-    for m in range(1, half + 1):
-        d = (raw[:, m:] - raw[:, :-m]).reshape(-1, c_n)  # (S (N − m), C)
-        ok = np.isfinite(d)
-        dz = np.where(ok, d, 0.0)
-        cnt = ok.T.astype(float) @ ok  # (C, C): pairs where both channels are measured
-        gamma = 0.5 * (dz.T @ dz) / np.maximum(cnt, 1.0)  # symmetric: lag −m is the same
-        out[:, :, half + m] = out[:, :, half - m] = np.where(cnt > 4 * n, out[:, :, half] - gamma, 0.0)
+            for m in range(-half, half + 1):
+                p = _lag_product(eo[..., c], eo[..., c2], 0, m)
+                p = p[np.isfinite(p)]
+                out[c, c2, half + m] = float(np.mean(p)) if p.size > 4 * n else 0.0
     return out
 
 
@@ -339,8 +314,7 @@ def _assemble(lags: np.ndarray, n: int, noise: np.ndarray) -> tuple[np.ndarray, 
     """``X`` ``(C N, C N)`` from :func:`lag_covariances`, less the white noise (capped), tapered, made PSD."""
     c_n, half = lags.shape[0], (lags.shape[2] - 1) // 2
     lag = np.arange(n)[None, :] - np.arange(n)[:, None]  # j − i
-    w = _LAG_WINDOW * half
-    taper = np.where(np.abs(lag) < w, 0.5 * (1.0 + np.cos(np.pi * lag / w)), 0.0)
+    taper = np.where(np.abs(lag) < half, 0.5 * (1.0 + np.cos(np.pi * lag / half)), 0.0)
     X = np.zeros((c_n * n, c_n * n))
     noise = noise.copy()
     for c in range(c_n):
