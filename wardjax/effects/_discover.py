@@ -73,6 +73,7 @@ from scipy.special import ndtr  # the normal tail: scipy.stats's own kernel, ~1 
 from ._effect import Effect, Param
 from ._evidence import _NOISE_Z, _dominant_first, _gap_p, _lr_p, _within_noise
 from ._inputs import _check_inputs, _split_library
+from ._recheck import VariogramRecheck
 from ._report import Candidate, DiscoveryReport, FitState, Step
 from ._solve import _cov_full, _fit_batch, _Layout, _residual_view
 from ._structure import _binned_test
@@ -131,6 +132,7 @@ class _Search:
         self.layout = _Layout(self.base, testable)
         self.n_obs = int(data.n_obs)
         self.cross: CrossTexture | None = None  # set when the texture is carried (design effects)
+        self.recheck: VariogramRecheck | None = None  # ... and the guard's second opinion
         # whitened by the texture's covariance, an LM step costs far more than a call's overhead: each fit alone
         # (batched, the baseline's 3 starts ran padded to the step's 16, every one until the slowest converged)
         self.solo = self.n_obs >= _SOLO_MIN_OBS or getattr(data, "whiten", None) is not None
@@ -345,6 +347,12 @@ def _continue_contenders(search: _Search, cur: FitState, remaining: list, fits: 
             refined.add(i)
 
 
+def _rechecked(search: _Search, cur: FitState, win: Candidate) -> Candidate:
+    """``win`` with the guard's second opinion, the texture's covariance from the variogram, where it is carried."""
+    got = None if search.recheck is None or win.state is None else search.recheck(cur, win.state)
+    return win if got is None else dataclasses.replace(win, variogram=got)
+
+
 def _deflated(search: _Search, cur: _View, cand: Candidate, state: FitState) -> Candidate:
     """``cand`` with Δχ² deflated by the texture between scanlines in ΔBIC and the p-value (:class:`CrossTexture`)."""
     new, cross = search.residual_view(state), search.cross
@@ -483,6 +491,12 @@ def _unexplained_structure(search: _Search, cur: _View, partial: list[Candidate]
         unexplained.append(
             f"{c.effect} is supported (ΔBIC = {c.delta_bic:.1f}) but explains only "
             f"{100 * c.explained:.0f} % of the excess: a partial match, not named"
+            + (
+                ""
+                if c.variogram is None
+                else f" (with the texture's covariance from the variogram: gap left "
+                f"{c.variogram[0]:.3f}, p = {c.variogram[1]:.1e})"
+            )
         )
     return unexplained, structure
 
@@ -516,8 +530,11 @@ class _Steps:
             if not (win.delta_bic > 0 and win.p_value * len(remaining) < alpha):
                 break
             if win.explained < min_explained and win.gap_p_after < structure_p:
-                self.partial.append(win)
-                break
+                win = _rechecked(search, cur.state, win)
+                v = win.variogram
+                if v is None or (v[2] < min_explained and v[1] < structure_p):
+                    self.partial.append(win)
+                    break
             self.ambiguous += [
                 (win.effect, c.effect, win.delta_bic - c.delta_bic)
                 for c in cands[1:]
@@ -550,9 +567,10 @@ def _baseline(model, data, testable, lm_steps: int, chunk: int, texture: bool):
         search = _Search(model, data, testable, lm_steps, chunk)
     if textured is None:
         return search, cur, None
-    data, tex, cross = textured
-    search = _Search(model, data, testable, lm_steps, chunk)
+    data_tex, tex, cross = textured
+    search = _Search(model, data_tex, testable, lm_steps, chunk)
     search.cross = cross
+    search.recheck = VariogramRecheck(lambda d: _Search(model, d, testable, lm_steps, chunk), data, cur.pred, cur.rho)
     return search, search.residual_view(_fit_baseline(search)), tex
 
 

@@ -66,6 +66,11 @@ class Candidate:
         ``D ≥ 1`` that divided Δχ² in ΔBIC and the p-value: the texture
         between scanlines and channels (1 without the texture term; see
         :func:`wardjax.effects._texture.design_effect`).
+    variogram
+        ``(gap, gap p, explained)`` of the model with the effect refitted
+        under the texture's covariance from the variogram: the partial-match
+        guard's second opinion, read only where the guard would refuse
+        (:mod:`wardjax.effects._recheck`); ``None`` otherwise.
     converged
         Its fit converged. ``False`` when Levenberg–Marquardt stopped at its
         step cap: Δχ² and ΔBIC are then lower bounds. ``discover`` continues
@@ -83,13 +88,15 @@ class Candidate:
     state: FitState | None = None
     gap_p_after: float = math.nan
     design_effect: float = 1.0
+    variogram: tuple[float, float, float] | None = None
 
     @property
     def converged(self) -> bool:
         return self.state is None or bool(self.state.ok)
 
     def as_dict(self) -> dict:
-        return {
+        v = dict(zip(("gap_variogram", "gap_p_variogram", "explained_variogram"), self.variogram or ()))
+        return {k: _num(x) for k, x in v.items()} | {
             k: _num(getattr(self, k))
             for k in (
                 "effect",
@@ -316,6 +323,12 @@ class DiscoveryReport:
                 f"LR p = {ev.p_value:.2g}, explains {100 * min(ev.explained, 1):.0f} % of the excess; "
                 f"gap {s.gap_before:.3f} → {s.gap_after:.3f}.\n"
             )
+            if ev.variogram is not None:
+                L.append(
+                    f"It leaves a significant gap under the texture's covariance about each scanline's mean, but not "
+                    f"under its covariance from the variogram (gap {ev.variogram[0]:.3f}, p = {ev.variogram[1]:.2g}, "
+                    f"{100 * min(ev.variogram[2], 1):.0f} % of the excess): named.\n"
+                )
             L.append("| candidate | k | Δχ² | ΔBIC | LR p | structure p |\n|---|---|---|---|---|---|")
             for c in s.candidates:
                 ge = "" if c.converged else "≥ "
@@ -352,7 +365,7 @@ class DiscoveryReport:
         L.append(
             f"\n_Criterion: largest ΔBIC, added if ΔBIC > 0, Bonferroni LR p < {self.settings['alpha']}, and "
             f"explaining ≥ {100 * self.settings['min_explained']:.0f} % of the excess or leaving a gap within the "
-            f"noise. Time {self.seconds:.1f} s._"
+            f"noise (with a texture: under either of its covariances). Time {self.seconds:.1f} s._"
         )
         return "\n".join(L) + "\n"
 

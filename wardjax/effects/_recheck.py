@@ -1,0 +1,74 @@
+"""The partial-match guard's second opinion on a textured capture: the gap a winner leaves, under the variogram.
+
+Why a second covariance
+    ``discover`` refuses a strongly supported winner that explains less than
+    half the excess and leaves a significant gap (:mod:`wardjax.effects._discover`,
+    "Guard against confident wrong names"): a large discrepancy that a library
+    effect only dents. On a textured capture the gap left is read under the
+    texture's covariance measured from products about each scanline's mean
+    (:func:`~wardjax.effects._texture.lag_covariances`), whose bias bends the
+    long lags on textures smooth along the scanline; untouched captures of
+    10 % wood then read gaps up to 1.050, and a correct winner on top of them
+    looked like a dent in something bigger. The covariance from the
+    cross-variogram has no such bias (untouched: 0.987 ± 0.020 against
+    0.979 ± 0.026) but, used for every fit, lost more library draws than it
+    gained (docs/missing-effects.md). So it is read only here: the current
+    model and the winner are refitted under it, from where they stand, and
+    the guard holds only if it holds under both covariances.
+
+    A pure relaxation: nothing the guard let through is refused, the evidence
+    (ΔBIC, LR) is untouched, and nothing is computed unless the guard is
+    about to refuse. On the textured bench's 47 refusals (seeds 0–2, 8 bits):
+    six of the 13 library winners were let through (gaps left 1.006–1.020
+    under the variogram), none of the 30 blurred frames (gaps left ≥ 1.12).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+
+from ._evidence import _gap_p
+from ._report import FitState
+from ._texture_term import with_texture
+
+__all__ = ["VariogramRecheck"]
+
+
+class VariogramRecheck:
+    """Refits a state under the texture's covariance from the variogram; built on first use.
+
+    ``make_search(data)`` is the run's ``_Search`` constructor over other
+    data (same shapes: the run's compiled program serves it); ``data``,
+    ``pred`` and ``rho`` are what :func:`~wardjax.effects._texture_term.with_texture`
+    measured the texture from (the data, the baseline's prediction ``(S, N, C)``
+    and profiled ρd ``(S, 1, C)`` under an identity whitening).
+    """
+
+    def __init__(self, make_search: Callable, data, pred, rho):
+        self._make, self._inputs = make_search, (data, pred, rho)
+        self._search = None
+        self._built = False
+
+    def _get(self):
+        if not self._built:
+            self._built = True
+            textured = with_texture(*self._inputs, variogram=True)
+            self._search = None if textured is None else self._make(textured[0])
+        return self._search
+
+    def _refit(self, st: FitState) -> FitState:
+        search = self._get()
+        r = search.fit([(st.u, list(st.free), st.active)])[0]
+        return search.state_of(search.refine(r, st.active), st.active)
+
+    def __call__(self, cur: FitState, new: FitState) -> tuple[float, float, float] | None:
+        """``(gap, P(χ²_dof ≥ χ²), explained)`` of ``new`` against ``cur``, both refitted under the variogram's
+        covariance; ``None`` where it finds no texture."""
+        if self._get() is None:
+            return None
+        b, w = self._refit(cur), self._refit(new)
+        if not (math.isfinite(b.chi2) and math.isfinite(w.chi2)):
+            return None
+        d = max(b.chi2 - w.chi2, 0.0)
+        return w.gap, _gap_p(w.chi2, w.dof), d / max(b.chi2 - b.dof, d, 1e-300)
