@@ -302,6 +302,9 @@ def test_guard_second_opinion_names_a_ramp_on_wood_and_still_refuses_a_blur(tmp_
         assert v is not None and v[0] < 1.03 and v[1] > 1e-3, v  # named on the second opinion
         assert "not under its covariance from the variogram" in rep.to_markdown()
         assert rep.steps[0].evidence.as_dict()["gap_variogram"] == pytest.approx(v[0])
+        # the stop rule reads the same covariance: nothing is added on top of a gap it calls noise
+        assert rep.found == named and rep.within_noise, (rep.found, rep.verdict())
+        assert "within the noise under the texture's covariance from the variogram" in rep.verdict()
     else:
         assert rep.partial, rep.unexplained
         assert any("covariance from the variogram: gap left 1.1" in u for u in rep.unexplained), rep.unexplained

@@ -347,6 +347,11 @@ def _continue_contenders(search: _Search, cur: FitState, remaining: list, fits: 
             refined.add(i)
 
 
+def _gap_within_noise(v: tuple[float, float, float] | None, st: FitState) -> bool:
+    """The stop rule on the gap ``v[0]`` the variogram's covariance read for ``st`` (same degrees of freedom)."""
+    return v is not None and _within_noise(dataclasses.replace(st, chi2=v[0] * st.dof))
+
+
 def _rechecked(search: _Search, cur: FitState, win: Candidate) -> Candidate:
     """``win`` with the guard's second opinion, the texture's covariance from the variogram, where it is carried."""
     got = None if search.recheck is None or win.state is None else search.recheck(cur, win.state)
@@ -517,7 +522,9 @@ class _Steps:
         testable = search.testable
         for _ in range(max_steps):
             cur = self.cur
-            if stop_within_noise and self.found and _within_noise(cur.state):
+            # the stop rule under either of the texture's covariances (the variogram's read where it named the last)
+            last = self.steps[-1].evidence.variogram if self.steps else None
+            if stop_within_noise and self.found and (_within_noise(cur.state) or _gap_within_noise(last, cur.state)):
                 return True
             remaining = [i for i in range(len(testable)) if i not in cur.state.active]
             if not remaining:
