@@ -347,11 +347,6 @@ def _continue_contenders(search: _Search, cur: FitState, remaining: list, fits: 
             refined.add(i)
 
 
-def _gap_within_noise(v: tuple[float, float, float] | None, st: FitState) -> bool:
-    """The stop rule on the gap ``v[0]`` the variogram's covariance read for ``st`` (same degrees of freedom)."""
-    return v is not None and _within_noise(dataclasses.replace(st, chi2=v[0] * st.dof))
-
-
 def _rechecked(search: _Search, cur: FitState, win: Candidate) -> Candidate:
     """``win`` with the guard's second opinion, the texture's covariance from the variogram, where it is carried."""
     got = None if search.recheck is None or win.state is None else search.recheck(cur, win.state)
@@ -516,6 +511,14 @@ class _Steps:
         self.steps: list[Step] = []
         self.partial: list[Candidate] = []
         self.ambiguous: list[tuple[str, str, float]] = []
+        self.variogram_gap: float | None = None  # the gap the stop rule read under the variogram's covariance
+
+    def _noise_v(self, v, i: int, st: FitState) -> bool:
+        """The stop rule on the gap ``v[i]`` the variogram's covariance read for ``st``'s model (same dof)."""
+        if v is None or not _within_noise(dataclasses.replace(st, chi2=v[i] * st.dof)):
+            return False
+        self.variogram_gap = v[i]
+        return True
 
     def search(self, search, max_steps, alpha, min_explained, structure_p, stop_within_noise, sample) -> bool:
         """Add effects until none is justified; True if it stopped because the gap is within the noise."""
@@ -524,7 +527,7 @@ class _Steps:
             cur = self.cur
             # the stop rule under either of the texture's covariances (the variogram's read where it named the last)
             last = self.steps[-1].evidence.variogram if self.steps else None
-            if stop_within_noise and self.found and (_within_noise(cur.state) or _gap_within_noise(last, cur.state)):
+            if stop_within_noise and self.found and (_within_noise(cur.state) or self._noise_v(last, 0, cur.state)):
                 return True
             remaining = [i for i in range(len(testable)) if i not in cur.state.active]
             if not remaining:
@@ -539,6 +542,8 @@ class _Steps:
             if win.explained < min_explained and win.gap_p_after < structure_p:
                 win = _rechecked(search, cur.state, win)
                 v = win.variogram
+                if stop_within_noise and self.found and self._noise_v(v, 3, cur.state):
+                    return True  # what is found leaves a gap the variogram's covariance calls noise
                 if v is None or (v[2] < min_explained and v[1] < structure_p):
                     self.partial.append(win)
                     break
@@ -689,5 +694,6 @@ def discover(
             "texture": tex,
             "stop_rule": f"χ² − dof ≤ {_NOISE_Z:g}·√(2 dof)" if stop_within_noise else None,
             "stopped_within_noise": stopped,
+            "variogram_gap": run.variogram_gap,
         },
     )

@@ -62,13 +62,13 @@ class VariogramRecheck:
         r = search.fit([(st.u, list(st.free), st.active)])[0]
         return search.state_of(search.refine(r, st.active), st.active)
 
-    def __call__(self, cur: FitState, new: FitState) -> tuple[float, float, float] | None:
-        """``(gap, P(χ²_dof ≥ χ²), explained)`` of ``new`` against ``cur``, both refitted under the variogram's
-        covariance; ``None`` where it finds no texture."""
+    def __call__(self, cur: FitState, new: FitState) -> tuple[float, float, float, float] | None:
+        """``(gap, P(χ²_dof ≥ χ²), explained)`` of ``new`` against ``cur``, and the gap of ``cur``, both refitted
+        under the variogram's covariance; ``None`` where it finds no texture."""
         if self._get() is None:
             return None
         b, w = self._refit(cur), self._refit(new)
         if not (math.isfinite(b.chi2) and math.isfinite(w.chi2)):
             return None
         d = max(b.chi2 - w.chi2, 0.0)
-        return w.gap, _gap_p(w.chi2, w.dof), d / max(b.chi2 - b.dof, d, 1e-300)
+        return w.gap, _gap_p(w.chi2, w.dof), d / max(b.chi2 - b.dof, d, 1e-300), b.gap

@@ -67,9 +67,10 @@ class Candidate:
         between scanlines and channels (1 without the texture term; see
         :func:`wardjax.effects._texture.design_effect`).
     variogram
-        ``(gap, gap p, explained)`` of the model with the effect refitted
-        under the texture's covariance from the variogram: the partial-match
-        guard's second opinion, read only where the guard would refuse
+        ``(gap, gap p, explained, gap before)`` of the model with the effect
+        (and, last, of the model without it) refitted under the texture's
+        covariance from the variogram: the partial-match guard's second
+        opinion, read only where the guard would refuse
         (:mod:`wardjax.effects._recheck`); ``None`` otherwise.
     converged
         Its fit converged. ``False`` when Levenberg–Marquardt stopped at its
@@ -88,14 +89,19 @@ class Candidate:
     state: FitState | None = None
     gap_p_after: float = math.nan
     design_effect: float = 1.0
-    variogram: tuple[float, float, float] | None = None
+    variogram: tuple[float, float, float, float] | None = None
 
     @property
     def converged(self) -> bool:
         return self.state is None or bool(self.state.ok)
 
     def as_dict(self) -> dict:
-        v = dict(zip(("gap_variogram", "gap_p_variogram", "explained_variogram"), self.variogram or ()))
+        v = dict(
+            zip(
+                ("gap_variogram", "gap_p_variogram", "explained_variogram", "gap_before_variogram"),
+                self.variogram or (),
+            )
+        )
         return {k: _num(x) for k, x in v.items()} | {
             k: _num(getattr(self, k))
             for k in (
