@@ -243,8 +243,8 @@ class DiscoveryReport:
             what = f"found {', '.join(self.found)}" if self.found else "nothing missing"
             if self.ambiguous:
                 what += "".join(f" (or {b}: not told apart)" for _, b, _ in self.ambiguous)
-            v = self.steps[-1].evidence.variogram if self.steps else None
-            under = "" if v is None else " under the texture's covariance from the variogram"
+            v = self.settings.get("variogram_gap")
+            under = "" if v is None else f" under the texture's covariance from the variogram (gap {v:.3f})"
             return f"{what}; the gap is within the noise{under}: nothing further needed"
         if self.found and self.explained:
             return f"found {', '.join(self.found)}; the residuals are now consistent with the noise"
