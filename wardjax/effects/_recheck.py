@@ -19,8 +19,8 @@ Why a second covariance
     A pure relaxation: nothing the guard let through is refused, the evidence
     (ΔBIC, LR) is untouched, and nothing is computed unless the guard is
     about to refuse. On the textured bench's 47 refusals (seeds 0–2, 8 bits):
-    six of the 13 library winners were let through (gaps left 1.006–1.020
-    under the variogram), none of the 30 blurred frames (gaps left ≥ 1.12).
+    six of the 13 library winners were let through (gaps left 1.006–1.023
+    under the variogram), none of the 28 blurred frames (gaps left ≥ 1.12).
 """
 
 from __future__ import annotations
