@@ -59,6 +59,7 @@ class VariogramRecheck:
 
     def _refit(self, st: FitState) -> FitState:
         search = self._get()
+        assert search is not None  # called only once _get() found a texture (__call__)
         r = search.fit([(st.u, list(st.free), st.active)])[0]
         return search.state_of(search.refine(r, st.active), st.active)
 
