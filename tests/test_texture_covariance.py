@@ -4,6 +4,7 @@ design effect of the part it leaves out (between neighbouring scanlines)."""
 import math
 
 import numpy as np
+import pytest
 
 from wardjax.effects._texture import (
     TextureFit,
@@ -239,3 +240,20 @@ def test_variogram_covariance_is_unbiased_on_two_runs_where_products_about_the_m
     g_v, g_m = _profiled_chi2(e[..., 0], X_v, noise, ok[..., 0]), _profiled_chi2(e[..., 0], X_m, noise, ok[..., 0])
     assert 0.92 < g_v < 1.05, g_v
     assert g_m < 0.88, g_m
+
+
+def test_lag_sums_by_fft_equal_the_sums_over_each_overlap():
+    """The cross-covariance and the design effect sum products over every scanline and sample lag; by FFT they must
+    give the sums taken directly over each overlap, for every lag sign (an index off by one would shift them)."""
+    from wardjax.effects._texture import _lag_sums
+
+    rng = np.random.default_rng(3)
+    a, b = rng.standard_normal((7, 11)), rng.standard_normal((7, 11))
+    K, M = 3, 5
+    got = _lag_sums(a, b, K, M)
+    for k in range(-K, K + 1):
+        for m in range(-M, M + 1):
+            want = sum(
+                a[s, i] * b[s + k, i + m] for s in range(7) for i in range(11) if 0 <= s + k < 7 and 0 <= i + m < 11
+            )
+            assert got[K + k, M + m] == pytest.approx(want, abs=1e-12)
