@@ -251,11 +251,19 @@ def _centred(e: np.ndarray, off: np.ndarray) -> np.ndarray:
     return eo - np.nansum(eo, axis=1, keepdims=True) / np.maximum(n, 1)
 
 
-def _lag_product(a: np.ndarray, b: np.ndarray, k: int, m: int) -> np.ndarray:
-    """``a[s, i] · b[s + k, i + m]`` over the overlap (``k ≥ 0``; ``m`` of either sign), flattened."""
-    s_n, n = a.shape
-    lo, hi = max(0, -m), n - max(0, m)
-    return (a[: s_n - k, lo:hi] * b[k:, lo + m : hi + m]).ravel()
+def _lag_means(eo: np.ndarray, K: int, M: int) -> np.ndarray:
+    """``⟨eo_{s,i,c} eo_{s+k,i+m,c'}⟩`` over the finite products, ``(C, C, 2K + 1, 2M + 1)`` for ``|k| ≤ K``,
+    ``|m| ≤ M``; 0 where fewer than ``4 N`` products (``N`` samples a scanline) are finite."""
+    s_n, n, c_n = eo.shape
+    ok = np.isfinite(eo)
+    z, w = np.where(ok, eo, 0.0), ok.astype(float)
+    out = np.zeros((c_n, c_n, 2 * K + 1, 2 * M + 1))
+    for c in range(c_n):
+        for c2 in range(c_n):
+            total = _lag_sums(z[..., c], z[..., c2], K, M)
+            count = np.rint(_lag_sums(w[..., c], w[..., c2], K, M))  # the products where both are measured
+            out[c, c2] = np.where(count > 4 * n, total / np.maximum(count, 1.0), 0.0)
+    return out
 
 
 def joint_autocovariance(
@@ -314,15 +322,8 @@ def lag_covariances(e: np.ndarray, off: np.ndarray, variogram: bool = False) -> 
     guard's second opinion (:mod:`wardjax.effects._recheck`).
     """
     s_n, n, c_n = e.shape
-    eo = _centred(e, off)
     half = max(n // 2, 2)
-    out = np.zeros((c_n, c_n, 2 * half + 1))
-    for c in range(c_n):
-        for c2 in range(c_n):
-            for m in range(-half, half + 1) if not variogram else (0,):
-                p = _lag_product(eo[..., c], eo[..., c2], 0, m)
-                p = p[np.isfinite(p)]
-                out[c, c2, half + m] = float(np.mean(p)) if p.size > 4 * n else 0.0
+    out = _lag_means(_centred(e, off), 0, half)[:, :, 0]
     if variogram:
         raw = np.where(off, e, np.nan)
         for m in range(1, half + 1):
@@ -423,17 +424,9 @@ def cross_covariance(e: np.ndarray, off: np.ndarray, lags: tuple[int, int] | Non
     marble 10 %'s camera response read a design effect of 8.8 (Δχ² 81 → 9.3,
     not named); over 40 samples 2.9, over half a scanline (49) 1.4.
     """
-    s_n, n, c_n = e.shape
+    n = e.shape[1]
     K, M = (_CROSS_SCANLINES, max(n // 2, 2)) if lags is None else lags
-    eo = _centred(e, off)
-    ok = np.isfinite(eo)
-    z, w = np.where(ok, eo, 0.0), ok.astype(float)
-    out = np.zeros((c_n, c_n, 2 * K + 1, 2 * M + 1))
-    for c in range(c_n):
-        for c2 in range(c_n):
-            total = _lag_sums(z[..., c], z[..., c2], K, M)
-            count = np.rint(_lag_sums(w[..., c], w[..., c2], K, M))  # the products where both are measured
-            out[c, c2] = np.where(count > 4 * n, total / np.maximum(count, 1.0), 0.0)
+    out = _lag_means(_centred(e, off), K, M)
     out[:, :, K] = 0.0  # within a scanline: modelled by the whitening
     return out
 
@@ -442,7 +435,7 @@ def _lag_sums(a: np.ndarray, b: np.ndarray, K: int, M: int) -> np.ndarray:
     """``Σ_{s,i} a[s, i] b[s + k, i + m]`` over the overlap, for ``|k| ≤ K``, ``|m| ≤ M``: ``(2K + 1, 2M + 1)``.
 
     One FFT cross-correlation of the ``(S, N)`` arrays instead of a sum per
-    lag (:func:`_lag_product`): the same numbers to ~10⁻¹⁵ of their scale, and
+    lag: the same numbers to ~10⁻¹⁵ of their scale, and
     the ~14,000 lags of three channels' cross-covariance in 10 ms instead of
     0.4 s — it is measured once per candidate whose evidence is deflated.
     """
