@@ -689,6 +689,7 @@ def discover(
         settings={
             "alpha": alpha,
             "min_explained": min_explained,
+            "structure_p": structure_p,
             "max_steps": max_steps,
             "criterion": "BIC+LR",
             "texture": tex,

@@ -336,7 +336,7 @@ class DiscoveryReport:
                 why = (
                     f"under its covariance from the variogram it explains {100 * min(x, 1):.0f} % of the excess "
                     f"(gap {g:.3f}, p = {p:.2g})"
-                    if x >= self.settings["min_explained"]
+                    if p < self.settings.get("structure_p", 1e-3)
                     else f"not under its covariance from the variogram (gap {g:.3f}, p = {p:.2g}, "
                     f"{100 * min(x, 1):.0f} % of the excess)"
                 )
