@@ -22,7 +22,17 @@ Independence from the fitter
       colour cast of the lamp absent when the standard was calibrated; on the
       ratio a per-channel factor).
 
-    The image is re-quantised to the capture's bit depth.
+    The image is re-quantised to the capture's bit depth, by nearest or by
+    stochastic rounding (``rounding``). Nearest rounding after a map from codes
+    to codes makes the rounding error a fixed function of the original code:
+    neighbouring pixels and channels with the same codes share it (banding,
+    ``benchmarks/requantisation.py``), which no camera does — its response acts
+    on the signal before its one quantisation, and the signal's noise makes
+    that quantisation's error white. Stochastic rounding (``⌊x + U⌋``, ``U``
+    uniform on [0, 1), drawn from ``seed``) is unbiased and independent from
+    pixel to pixel and channel to channel: the edit then adds white noise of
+    variance ≤ 1/4 code², which the capture's noise estimate measures, and no
+    pattern of its own.
 
 Run ``python -m benchmarks.edited_captures [--texture wood|marble|none ...] [--size W H]``.
 """
@@ -37,9 +47,9 @@ from pathlib import Path
 
 import numpy as np
 
-from wardjax._files import decode_image, encode_image, read_image, write_image
+from wardjax._files import decode_image, encode_values, read_image, write_image
 
-__all__ = ["EDITS", "edit_capture", "make_capture", "diagnose_folder"]
+__all__ = ["EDITS", "ROUNDINGS", "edit_capture", "make_capture", "diagnose_folder", "requantise"]
 
 CONFIGS = {"old": {"texture": False, "stop_within_noise": False}, "new": {"texture": True}}
 EDITS = {
@@ -65,9 +75,34 @@ def make_capture(
     return simulate_capture(p, folder, seed=seed, image_size=tuple(size), texture=texture, **kw)
 
 
-def edit_capture(src: Path, dst: Path, kind: str | None, amount: float = 0.0) -> Path:
-    """Copy the capture folder ``src`` to ``dst`` with the lit frame edited (see the module docstring)."""
+ROUNDINGS = ("nearest", "stochastic")
+
+
+def requantise(x: np.ndarray, full: float, dtype, rounding: str = "nearest", seed: int | list[int] = 0) -> np.ndarray:
+    """Codes from unrounded codes ``x`` (any shape, in ``[0, full]``), rounded to nearest or stochastically.
+
+    ``seed``: an int or a list of ints (:func:`numpy.random.default_rng`), for the stochastic draw.
+    """
+    if rounding == "nearest":
+        q = np.rint(x)
+    elif rounding == "stochastic":
+        q = np.floor(x + np.random.default_rng(seed).random(np.shape(x)))
+    else:
+        raise ValueError(f"rounding must be one of {ROUNDINGS}, not {rounding!r}")
+    return np.clip(q, 0.0, full).astype(dtype)
+
+
+def edit_capture(
+    src: Path, dst: Path, kind: str | None, amount: float = 0.0, *, rounding: str = "nearest", seed: int | list[int] = 0
+) -> Path:
+    """Copy the capture folder ``src`` to ``dst`` with the lit frame edited (see the module docstring).
+
+    ``rounding``: how the edited frame is re-quantised, ``"nearest"`` or ``"stochastic"`` (drawn from ``seed``).
+    """
     import tomllib
+
+    if rounding not in ROUNDINGS:
+        raise ValueError(f"rounding must be one of {ROUNDINGS}, not {rounding!r}")
 
     shutil.copytree(src, dst, dirs_exist_ok=True)
     if kind is None:
@@ -78,8 +113,7 @@ def edit_capture(src: Path, dst: Path, kind: str | None, amount: float = 0.0) ->
     codes = read_image(lit)
     full = float(2**bits - 1)
     if kind == "response":
-        out = np.round(full * (codes / full) ** amount).astype(codes.dtype)
-        write_image(lit, out)
+        write_image(lit, requantise(full * (codes / full) ** amount, full, codes.dtype, rounding, seed))
         return dst
     v = decode_image(codes, enc, bits).astype(np.float64)
     h, w = v.shape[:2]
@@ -101,7 +135,8 @@ def edit_capture(src: Path, dst: Path, kind: str | None, amount: float = 0.0) ->
         v = v * np.array([1.0 + amount, 1.0, 1.0 - amount])
     else:
         raise ValueError(f"unknown edit {kind!r}")
-    write_image(lit, encode_image(np.clip(v, 0.0, 1.0), enc, bits))
+    x = encode_values(np.clip(v, 0.0, 1.0), enc) * full
+    write_image(lit, requantise(x, full, codes.dtype, rounding, seed))
     return dst
 
 

@@ -66,7 +66,7 @@ import numpy as np
 
 from wardjax._files import write_bytes_atomic
 
-from .edited_captures import diagnose_folder, edit_capture, make_capture
+from .edited_captures import ROUNDINGS, diagnose_folder, edit_capture, make_capture
 
 __all__ = ["CASES", "EXPECTED", "cases", "run_case", "summarise"]
 
@@ -106,6 +106,7 @@ FIELDS = (
     "seed",
     "size",
     "bits",
+    "rounding",
     "expected",
     "found",
     "first",
@@ -135,8 +136,23 @@ def _base(tmp: Path, tex: str, amp: float, seed: int, size, eta: float = 0.0, bi
     return folder
 
 
-def run_case(tmp: Path, seed: int, strength: str, amp: float, tex: str, name: str, size, bits: int = 8) -> dict:
-    """Make, edit and diagnose one case; the CSV row."""
+def run_case(
+    tmp: Path,
+    seed: int,
+    strength: str,
+    amp: float,
+    tex: str,
+    name: str,
+    size,
+    bits: int = 8,
+    rounding: str = "stochastic",
+) -> dict:
+    """Make, edit and diagnose one case; the CSV row.
+
+    ``rounding``: how the edited lit frame is re-quantised
+    (:func:`benchmarks.edited_captures.requantise`); the stochastic draw is
+    seeded by the case, so a rerun writes the same file.
+    """
     kind, amounts = CASES[name]
     amount = amounts[0 if strength == "weak" else 1]
     eta = amount if name == "anisotropy" else 0.0
@@ -146,7 +162,8 @@ def run_case(tmp: Path, seed: int, strength: str, amp: float, tex: str, name: st
     folder = tmp / "case"
     if folder.exists():
         shutil.rmtree(folder)
-    edit_capture(base, folder, kind, amount)
+    draw = [cap_seed, TEXTURES.index(tex), round(amp * 100), list(CASES).index(name), int(strength == "strong")]
+    edit_capture(base, folder, kind, amount, rounding=rounding, seed=draw)
     t0 = time.perf_counter()
     rep = diagnose_folder(folder, texture=True)
     sec = time.perf_counter() - t0
@@ -161,6 +178,7 @@ def run_case(tmp: Path, seed: int, strength: str, amp: float, tex: str, name: st
         "seed": seed,
         "size": f"{size[0]}x{size[1]}",
         "bits": bits,
+        "rounding": rounding if kind else "",
         "expected": "(outside)" if EXPECTED[name] is None else EXPECTED[name],
         "found": "+".join(rep.found),
         "first": first,
@@ -176,6 +194,13 @@ def run_case(tmp: Path, seed: int, strength: str, amp: float, tex: str, name: st
 
 def _amount(name: str, strength: str) -> float:
     return CASES[name][1][0 if strength == "weak" else 1]
+
+
+def _rounding(row: dict) -> str:
+    """How a row's edit was re-quantised: ``""`` where nothing was edited (older rows: nearest)."""
+    if CASES[row["case"]][0] is None:
+        return ""
+    return row.get("rounding") or "nearest"
 
 
 def _key(case) -> tuple:
@@ -267,6 +292,12 @@ def main(argv=None) -> None:
     ap.add_argument("--strengths", nargs="+", default=["strong", "weak"])
     ap.add_argument("--cases", nargs="+", default=None)
     ap.add_argument("--bit-depth", type=int, default=8, choices=(8, 16), help="of the captures' image files")
+    ap.add_argument(
+        "--rounding",
+        default="stochastic",
+        choices=ROUNDINGS,
+        help="how an edited lit frame is re-quantised (the stored 8-bit run of 2026-11-26: nearest)",
+    )
     ap.add_argument("--limit", type=int, default=None, help="stop after this many cases")
     ap.add_argument("--out", type=Path, default=RESULTS / "textured_bench.csv")
     ap.add_argument("--append", action="store_true", help="keep the rows already in --out")
@@ -274,17 +305,19 @@ def main(argv=None) -> None:
     a = ap.parse_args(argv)
     rows = _read(a.out) if (a.summary or a.append) and a.out.exists() else []
     if not a.summary:
-        # stale edits, and rows of another bit depth (older rows: 8-bit), out
+        # stale edits, and rows of another bit depth or rounding (older rows: 8-bit, nearest), out
         rows = [
             r
             for r in rows
-            if float(r["amount"]) == _amount(r["case"], r["strength"]) and int(r.get("bits") or 8) == a.bit_depth
+            if float(r["amount"]) == _amount(r["case"], r["strength"])
+            and int(r.get("bits") or 8) == a.bit_depth
+            and _rounding(r) in ("", a.rounding)
         ]
         done = {_key(r) for r in rows}
         todo = [c for c in cases(a.seeds, a.strengths, a.cases) if _key(c) not in done][: a.limit]
         with tempfile.TemporaryDirectory() as tmp:
             for i, (seed, strength, amp, tex, name) in enumerate(todo):
-                row = run_case(Path(tmp), seed, strength, amp, tex, name, tuple(a.size), a.bit_depth)
+                row = run_case(Path(tmp), seed, strength, amp, tex, name, tuple(a.size), a.bit_depth, a.rounding)
                 rows.append(row)
                 _write(rows, a.out)
                 print(
