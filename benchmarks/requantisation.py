@@ -6,7 +6,9 @@ them back at the capture's bit depth. Rounding after a non-linear map is an
 error of its own: it is a fixed function of the original code, so
 neighbouring pixels and channels with the same codes share it (banding). A
 camera whose response differs does not do this: its response acts before
-the one quantisation. For each bit depth this prints
+the one quantisation. For each bit depth (and, on 8-bit files, each rounding:
+nearest, and the stochastic rounding the textured bench uses by default,
+:func:`benchmarks.edited_captures.requantise`) this prints
 
 - the written value less the unrounded edit, in linear light: its SD, its
   correlation between neighbouring pixels (along rows and columns) and
@@ -94,19 +96,20 @@ def main(argv=None) -> None:
     a = ap.parse_args(argv)
     print(f"{a.texture} {a.amplitude:.0%}, seed {a.seed}, codes^{a.k}, {a.size[0]}×{a.size[1]}")
     print(
-        f"{'bits':>4s} {'err SD':>9s} {'lag-1 row':>9s} {'lag-1 col':>9s} {'channels':>9s} "
+        f"{'bits':>4s} {'rounding':>10s} {'err SD':>9s} {'lag-1 row':>9s} {'lag-1 col':>9s} {'channels':>9s} "
         f"{'b (1+ε)':>8s} {'a':>7s} {'a of γ':>7s} {'left/σ':>7s} {'γ left/σ':>8s}"
     )
     with tempfile.TemporaryDirectory() as tmp:
-        for bits in (8, 16):
-            base, edited = Path(tmp) / f"b{bits}", Path(tmp) / f"e{bits}"
-            kw = {"texture_amplitude": a.amplitude, "bit_depth": bits}
-            make_capture(base, texture=a.texture, size=tuple(a.size), seed=a.seed, **kw)
-            edit_capture(base, edited, "response", a.k)
+        for bits, rounding in ((8, "nearest"), (8, "stochastic"), (16, "nearest")):
+            base, edited = Path(tmp) / f"b{bits}", Path(tmp) / f"e{bits}_{rounding}"
+            if not base.exists():
+                kw = {"texture_amplitude": a.amplitude, "bit_depth": bits}
+                make_capture(base, texture=a.texture, size=tuple(a.size), seed=a.seed, **kw)
+            edit_capture(base, edited, "response", a.k, rounding=rounding, seed=a.seed)
             q, g = rounding_error(base, edited, a.k, bits), gamma_residual(base, edited)
             print(
-                f"{bits:4d} {q['sd']:9.2e} {q['lag1_row']:9.2f} {q['lag1_col']:9.2f} {q['channels']:9.2f} "
-                f"{g['b']:8.4f} {g['a']:7.4f} {g['a_expected']:7.4f} {g['rms_sigma']:7.3f}"
+                f"{bits:4d} {rounding:>10s} {q['sd']:9.2e} {q['lag1_row']:9.2f} {q['lag1_col']:9.2f} "
+                f"{q['channels']:9.2f} {g['b']:8.4f} {g['a']:7.4f} {g['a_expected']:7.4f} {g['rms_sigma']:7.3f}"
                 f" {g['rms_sigma_library']:8.3f}"
             )
 

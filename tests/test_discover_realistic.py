@@ -264,7 +264,9 @@ def test_gamma_is_the_ratio_power_a_tone_curve_on_the_codes_gives(tmp_path):
     one frame), is the library's γ on the ratio, ``f_std (f/f_std)^{1+ε}``: on 16-bit files what the fit
     ``log f₁ = a + b log f₀`` leaves is a few hundredths of the noise σ, with ``a = −ε log f_std``. On 8-bit
     files the rewrite adds banding — a rounding error shared by neighbouring pixels and channels, not white —
-    which is what the textured bench's 8-bit response edit carries besides the response."""
+    which is what the textured bench's 8-bit response edit carried besides the response with nearest rounding.
+    Stochastic rounding (the bench's default now) leaves an error that is white — uncorrelated between
+    neighbours and channels — and the fitted power unbiased: the 16-bit file's, not nearest rounding's."""
     from benchmarks.edited_captures import edit_capture, make_capture
     from benchmarks.requantisation import gamma_residual, rounding_error
 
@@ -274,6 +276,8 @@ def test_gamma_is_the_ratio_power_a_tone_curve_on_the_codes_gives(tmp_path):
         make_capture(base, texture="noise", size=(96, 72), seed=1, texture_amplitude=0.1, bit_depth=bits)
         edit_capture(base, edited, "response", 1.12)
         out[bits] = rounding_error(base, edited, 1.12, bits), gamma_residual(base, edited)
+    edit_capture(tmp_path / "b8", tmp_path / "s8", "response", 1.12, rounding="stochastic", seed=3)
+    qs, gs = rounding_error(tmp_path / "b8", tmp_path / "s8", 1.12, 8), gamma_residual(tmp_path / "b8", tmp_path / "s8")
     q16, g16 = out[16]
     assert g16["rms_sigma"] < 0.1 and g16["rms_sigma_library"] < 0.1, g16
     assert abs(g16["b"] - 1.12) < 0.01 and abs(g16["a"] - g16["a_expected"]) < 0.005, g16
@@ -281,6 +285,8 @@ def test_gamma_is_the_ratio_power_a_tone_curve_on_the_codes_gives(tmp_path):
     q8, g8 = out[8]
     assert q8["lag1_row"] > 0.3 and q8["lag1_col"] > 0.3 and q8["channels"] > 0.2, q8
     assert g8["rms_sigma"] > 2 * g16["rms_sigma"], (g8, g16)
+    assert max(abs(qs["lag1_row"]), abs(qs["lag1_col"]), abs(qs["channels"])) < 0.05, qs
+    assert abs(gs["b"] - g16["b"]) < 0.25 * abs(g8["b"] - g16["b"]), (gs, g8, g16)
 
 
 @pytest.mark.slow  # two discoveries on a textured capture: minutes on two cores
@@ -324,3 +330,25 @@ def test_nothing_added_after_a_clipped_highlight_once_the_variogram_calls_the_ga
     assert rep.found == ["saturation"], (rep.found, rep.gap, rep.partial)
     assert rep.within_noise and rep.settings["variogram_gap"] < 1.024, rep.settings["variogram_gap"]
     assert "within the noise under the texture's covariance from the variogram" in rep.verdict()
+
+
+def test_stochastic_requantisation_is_unbiased_white_and_refuses_an_unknown_rounding():
+    """The bench's stochastic rounding ``⌊x + U⌋``: its error has mean 0 and variance ``φ(1 − φ)`` (``φ`` the
+    fractional part) at every code, is independent between neighbours, and stays within one code; nearest
+    rounding is ``rint``. An unknown rounding is one clear error naming it."""
+    from benchmarks.edited_captures import requantise
+
+    rng = np.random.default_rng(5)
+    x = 100.0 + np.cumsum(rng.normal(0.0, 0.05, (200, 300)), axis=1) % 50.0  # smooth rows: nearest would band
+    q = requantise(x, 255.0, np.uint8, "stochastic", [1, 2]).astype(float)
+    e, phi = q - x, x - np.floor(x)
+    n = e.size
+    assert abs(e.mean()) < 4 * e.std() / np.sqrt(n), e.mean()
+    assert np.mean(e**2) == pytest.approx(np.mean(phi * (1 - phi)), rel=0.02)
+    assert abs(np.corrcoef(e[:, :-1].ravel(), e[:, 1:].ravel())[0, 1]) < 0.02
+    assert np.all(np.abs(e) < 1.0)
+    near = requantise(x, 255.0, np.uint8).astype(float) - x
+    assert np.corrcoef(near[:, :-1].ravel(), near[:, 1:].ravel())[0, 1] > 0.5  # the banding it replaces
+    assert np.array_equal(requantise(x, 255.0, np.uint8), np.rint(x).astype(np.uint8))
+    with pytest.raises(ValueError, match="'dither'"):
+        requantise(x, 255.0, np.uint8, "dither")
