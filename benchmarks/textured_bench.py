@@ -32,10 +32,10 @@ case                      edit (two strengths)                    expected first
 
 ``discover`` runs as ``wardjax diagnose --texture`` does (texture term on,
 stop rule on). One CSV row per case goes to
-``benchmarks/results/textured_bench.csv`` as soon as it is done (so a partial
+``benchmarks/results/textured_bench_stochastic.csv`` as soon as it is done (so a partial
 run counts); ``--summary`` prints the confusion matrix (true effect × first
 name), the null rate, the gap after discovery and the illumination ↔
-anisotropy confusion, and writes ``textured_bench_confusion.csv``.
+anisotropy confusion, and writes them beside ``--out`` as ``*_confusion.csv``.
 
 The cases run in rounds (strength × amplitude × seed), each round every
 texture × case, so a run stopped early is still balanced across cases.
@@ -43,12 +43,21 @@ texture × case, so a run stopped early is still balanced across cases.
 The captures' image files are 8-bit by default, as ``wardjax simulate``
 writes them; ``--bit-depth 16`` writes 16-bit files, on which an edit's
 re-encoding adds no banding of its own (``benchmarks/requantisation.py``:
-on 8-bit files the response edit's rounding is shared by neighbouring
-pixels and channels). The 16-bit run is kept beside the 8-bit one, in
-``textured_bench_16bit.csv``.
+on 8-bit files, rounded to nearest, the response edit's rounding is shared
+by neighbouring pixels and channels). The edited frame is re-quantised by
+stochastic rounding (``--rounding stochastic``, the default; drawn from the
+case, so a rerun writes the same file): its error is white, as a camera's
+own quantisation of a noisy signal is. The run of 2026-11-26 rounded to
+nearest (``--rounding nearest``) and is kept beside it in
+``textured_bench.csv`` (seed 0 strong), ``textured_bench_weak.csv``,
+``textured_bench_seed1.csv``, ``textured_bench_seed2.csv``; the 16-bit
+run in ``textured_bench_16bit.csv`` (at 16 bits the two roundings differ
+by 4·10⁻⁶ of full scale). Unedited cases (``none``, ``anisotropy``) are
+the same under either rounding, and a resumed run keeps their rows.
 
-Run ``python -m benchmarks.textured_bench [--size 160 120] [--seeds 0 1] [--bit-depth 8|16] [--limit N]``
-or ``python -m benchmarks.textured_bench --summary``.
+Run ``python -m benchmarks.textured_bench [--size 160 120] [--seeds 0 1 2] [--bit-depth 8|16]
+[--rounding stochastic|nearest] [--limit N] [--out CSV] [--append]`` or
+``python -m benchmarks.textured_bench --summary [--out CSV]``.
 """
 
 from __future__ import annotations
@@ -299,7 +308,7 @@ def main(argv=None) -> None:
         help="how an edited lit frame is re-quantised (the stored 8-bit run of 2026-11-26: nearest)",
     )
     ap.add_argument("--limit", type=int, default=None, help="stop after this many cases")
-    ap.add_argument("--out", type=Path, default=RESULTS / "textured_bench.csv")
+    ap.add_argument("--out", type=Path, default=RESULTS / "textured_bench_stochastic.csv")
     ap.add_argument("--append", action="store_true", help="keep the rows already in --out")
     ap.add_argument("--summary", action="store_true", help="only summarise --out")
     a = ap.parse_args(argv)
