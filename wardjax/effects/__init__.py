@@ -27,6 +27,7 @@ from ._screen import screen_data as screen_data
 from ._report import Candidate as Candidate
 from ._report import DiscoveryReport as DiscoveryReport
 from ._report import Step as Step
+from ._report import VariogramRead as VariogramRead
 
 __all__ = [
     "discover",
@@ -48,4 +49,5 @@ __all__ = [
     "Candidate",
     "DiscoveryReport",
     "Step",
+    "VariogramRead",
 ]

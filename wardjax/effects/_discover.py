@@ -495,7 +495,7 @@ def _unexplained_structure(search: _Search, cur: _View, partial: list[Candidate]
                 ""
                 if c.variogram is None
                 else f" (with the texture's covariance from the variogram: gap left "
-                f"{c.variogram[0]:.3f}, p = {c.variogram[1]:.1e})"
+                f"{c.variogram.gap:.3f}, p = {c.variogram.gap_p:.1e})"
             )
         )
     return unexplained, structure
@@ -513,11 +513,11 @@ class _Steps:
         self.ambiguous: list[tuple[str, str, float]] = []
         self.variogram_gap: float | None = None  # the gap the stop rule read under the variogram's covariance
 
-    def _noise_v(self, v, i: int, st: FitState) -> bool:
-        """The stop rule on the gap ``v[i]`` the variogram's covariance read for ``st``'s model (same dof)."""
-        if v is None or not _within_noise(dataclasses.replace(st, chi2=v[i] * st.dof)):
+    def _noise_v(self, gap: float | None, st: FitState) -> bool:
+        """The stop rule on the ``gap`` the variogram's covariance read for ``st``'s model (same dof)."""
+        if gap is None or not _within_noise(dataclasses.replace(st, chi2=gap * st.dof)):
             return False
-        self.variogram_gap = v[i]
+        self.variogram_gap = gap
         return True
 
     def search(self, search, max_steps, alpha, min_explained, structure_p, stop_within_noise, sample) -> bool:
@@ -526,8 +526,8 @@ class _Steps:
         for _ in range(max_steps):
             cur = self.cur
             # the stop rule under either of the texture's covariances (the variogram's read where it named the last)
-            last = self.steps[-1].evidence.variogram if self.steps else None
-            if stop_within_noise and self.found and (_within_noise(cur.state) or self._noise_v(last, 0, cur.state)):
+            last = getattr(self.steps[-1].evidence.variogram, "gap", None) if self.steps else None  # None: not read
+            if stop_within_noise and self.found and (_within_noise(cur.state) or self._noise_v(last, cur.state)):
                 return True
             remaining = [i for i in range(len(testable)) if i not in cur.state.active]
             if not remaining:
@@ -542,9 +542,9 @@ class _Steps:
             if win.explained < min_explained and win.gap_p_after < structure_p:
                 win = _rechecked(search, cur.state, win)
                 v = win.variogram
-                if stop_within_noise and self.found and self._noise_v(v, 3, cur.state):
+                if stop_within_noise and self.found and v is not None and self._noise_v(v.gap_before, cur.state):
                     return True  # what is found leaves a gap the variogram's covariance calls noise
-                if v is None or (v[2] < min_explained and v[1] < structure_p):
+                if v is None or (v.explained < min_explained and v.gap_p < structure_p):
                     self.partial.append(win)
                     break
             self.ambiguous += [

@@ -25,11 +25,12 @@ Why a second covariance
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Callable
 
 from ._evidence import _gap_p
-from ._report import FitState
+from ._report import FitState, VariogramRead
 from ._texture_term import with_texture
 
 __all__ = ["VariogramRecheck"]
@@ -47,29 +48,25 @@ class VariogramRecheck:
 
     def __init__(self, make_search: Callable, data, pred, rho):
         self._make, self._inputs = make_search, (data, pred, rho)
-        self._search = None
-        self._built = False
 
-    def _get(self):
-        if not self._built:
-            self._built = True
-            textured = with_texture(*self._inputs, variogram=True)
-            self._search = None if textured is None else self._make(textured[0])
-        return self._search
+    @functools.cached_property
+    def _search(self):
+        """The run's search over the data whitened by the variogram's covariance; ``None`` if it finds no texture."""
+        textured = with_texture(*self._inputs, variogram=True)
+        return None if textured is None else self._make(textured[0])
 
-    def _refit(self, st: FitState) -> FitState:
-        search = self._get()
-        assert search is not None  # called only once _get() found a texture (__call__)
+    def _refit(self, search, st: FitState) -> FitState:
         r = search.fit([(st.u, list(st.free), st.active)])[0]
         return search.state_of(search.refine(r, st.active), st.active)
 
-    def __call__(self, cur: FitState, new: FitState) -> tuple[float, float, float, float] | None:
-        """``(gap, P(χ²_dof ≥ χ²), explained)`` of ``new`` against ``cur``, and the gap of ``cur``, both refitted
-        under the variogram's covariance; ``None`` where it finds no texture."""
-        if self._get() is None:
+    def __call__(self, cur: FitState, new: FitState) -> VariogramRead | None:
+        """``new`` against ``cur``, both refitted under the variogram's covariance; ``None`` where it finds no
+        texture or a refit is not finite."""
+        search = self._search
+        if search is None:
             return None
-        b, w = self._refit(cur), self._refit(new)
+        b, w = self._refit(search, cur), self._refit(search, new)
         if not (math.isfinite(b.chi2) and math.isfinite(w.chi2)):
             return None
         d = max(b.chi2 - w.chi2, 0.0)
-        return w.gap, _gap_p(w.chi2, w.dof), d / max(b.chi2 - b.dof, d, 1e-300), b.gap
+        return VariogramRead(w.gap, _gap_p(w.chi2, w.dof), d / max(b.chi2 - b.dof, d, 1e-300), b.gap)

@@ -14,13 +14,14 @@ import io
 import json
 import math
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 
 from .._files import write_bytes_atomic
 from ._structure import _binned_test
 
-__all__ = ["Candidate", "DiscoveryReport", "FitState", "Step"]
+__all__ = ["Candidate", "DiscoveryReport", "FitState", "Step", "VariogramRead"]
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -37,6 +38,20 @@ class FitState:
     values: dict
     sigma: dict
     free: tuple[int, ...]  # indices of u the fit moved (an effect's optional parameters may stay held)
+
+
+class VariogramRead(NamedTuple):
+    """A winner and the model before it refitted under the texture's covariance from the variogram.
+
+    ``gap`` and ``gap_p`` (``P(χ²_dof ≥ χ²)``) of the model with the winner,
+    the fraction of the excess it ``explained``, and ``gap_before``, the
+    model without it (:mod:`wardjax.effects._recheck`).
+    """
+
+    gap: float
+    gap_p: float
+    explained: float
+    gap_before: float
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -67,11 +82,11 @@ class Candidate:
         between scanlines and channels (1 without the texture term; see
         :func:`wardjax.effects._texture.design_effect`).
     variogram
-        ``(gap, gap p, explained, gap before)`` of the model with the effect
-        (and, last, of the model without it) refitted under the texture's
-        covariance from the variogram: the partial-match guard's second
-        opinion, read only where the guard would refuse
-        (:mod:`wardjax.effects._recheck`); ``None`` otherwise.
+        :class:`VariogramRead`: the model with the effect (and the model
+        without it) refitted under the texture's covariance from the
+        variogram — the partial-match guard's second opinion, read only
+        where the guard would refuse (:mod:`wardjax.effects._recheck`);
+        ``None`` otherwise.
     converged
         Its fit converged. ``False`` when Levenberg–Marquardt stopped at its
         step cap: Δχ² and ΔBIC are then lower bounds. ``discover`` continues
@@ -89,20 +104,15 @@ class Candidate:
     state: FitState | None = None
     gap_p_after: float = math.nan
     design_effect: float = 1.0
-    variogram: tuple[float, float, float, float] | None = None
+    variogram: VariogramRead | None = None
 
     @property
     def converged(self) -> bool:
         return self.state is None or bool(self.state.ok)
 
     def as_dict(self) -> dict:
-        v = dict(
-            zip(
-                ("gap_variogram", "gap_p_variogram", "explained_variogram", "gap_before_variogram"),
-                self.variogram or (),
-            )
-        )
-        return {k: _num(x) for k, x in v.items()} | {
+        v = {} if self.variogram is None else self.variogram._asdict()
+        return {f"{k}_variogram": _num(x) for k, x in v.items()} | {
             k: _num(getattr(self, k))
             for k in (
                 "effect",
@@ -332,7 +342,7 @@ class DiscoveryReport:
                 f"gap {s.gap_before:.3f} → {s.gap_after:.3f}.\n"
             )
             if ev.variogram is not None:  # let through by the guard's second opinion: by its gap, or what it explains
-                g, p, x = ev.variogram[:3]
+                g, p, x = ev.variogram.gap, ev.variogram.gap_p, ev.variogram.explained
                 why = (
                     f"under its covariance from the variogram it explains {100 * min(x, 1):.0f} % of the excess "
                     f"(gap {g:.3f}, p = {p:.2g})"
