@@ -34,6 +34,7 @@ __all__ = [
     "ENCODINGS",
     "RAW_SUFFIXES",
     "atomic_path",
+    "check_regular_file",
     "check_writable_dir",
     "check_writable_file",
     "commit_folder",
@@ -44,6 +45,7 @@ __all__ = [
     "encode_values",
     "as_rgb",
     "jsonable",
+    "npy_header",
     "read_image",
     "remove_temporaries",
     "sha256",
@@ -110,6 +112,16 @@ def _writable_folder_reason(folder: Path) -> str | None:
     return None
 
 
+def _name_too_long(path: Path) -> str | None:
+    from .capture._rules import RuleError, check_path_name
+
+    try:
+        check_path_name(path)
+    except RuleError as e:
+        return e.message
+    return None
+
+
 def check_writable_dir(path) -> None:
     """Raise ``ValueError`` (one line naming ``path`` and the reason) if files cannot be written under folder ``path``.
 
@@ -117,7 +129,7 @@ def check_writable_dir(path) -> None:
     folder, a full disk (less than 1 MiB free).
     """
     path = Path(path)
-    reason = _writable_folder_reason(path)
+    reason = _name_too_long(path) or _writable_folder_reason(path)
     if reason is None:
         probe = path
         while not probe.exists():
@@ -131,6 +143,8 @@ def check_writable_dir(path) -> None:
 def check_writable_file(path) -> None:
     """Raise ``ValueError`` naming ``path`` if it cannot be written: a folder, or a folder that cannot hold it."""
     path = Path(path)
+    if (reason := _name_too_long(path)) is not None:
+        raise ValueError(f"{path}: cannot write here: {reason}")
     if path.is_dir():
         raise ValueError(f"{path}: cannot write here: is a folder, expected a file name")
     try:
@@ -144,14 +158,34 @@ def commit_folder(staging, dest, *, last: str) -> None:
 
     A batch writes a capture's outputs into a staging folder and commits them
     only once all are written, so that a fit failing mid-way leaves ``dest``
-    as it was; ``last`` (``params.json``) marks the capture finished.
+    as it was; ``last`` (``params.json``) marks the capture finished. A file in
+    ``dest`` is replaced only if ``dest`` holds an earlier fit (a ``last`` that
+    wardjax wrote); otherwise it is not ours, and ``ValueError`` names it
+    before anything is moved.
     """
     staging, dest = Path(staging), Path(dest)
-    dest.mkdir(parents=True, exist_ok=True)
     names = sorted(p.name for p in staging.iterdir() if p.is_file())
+    ours = _wardjax_folder(dest / last)  # an earlier fit's outputs, replaced by this one's
+    for name in names:
+        target = dest / name
+        if (target.exists() or target.is_symlink()) and not ours:
+            raise ValueError(
+                f"{target}: exists and was not written by wardjax; refusing to replace it "
+                "(choose an output folder of its own)"
+            )
+    dest.mkdir(parents=True, exist_ok=True)
     for name in sorted(names, key=lambda n: n == last):
         os.replace(staging / name, dest / name)
     shutil.rmtree(staging)
+
+
+def _wardjax_folder(record: Path) -> bool:
+    """``record`` is a ``params.json`` wardjax wrote: its folder holds a finished fit's outputs."""
+    try:
+        doc = json.loads(record.read_text())
+        return doc.get("software", {}).get("name") == "wardjax"
+    except (OSError, ValueError, AttributeError):
+        return False
 
 
 def write_bytes_atomic(path, data: bytes | bytearray) -> None:
@@ -195,6 +229,73 @@ def sha256(path) -> str:
         for block in iter(lambda: fh.read(1 << 20), b""):
             h.update(block)
     return "sha256:" + h.hexdigest()
+
+
+# --------------------------------------------------------------------------- input files
+
+
+def _not_regular(path: Path) -> str | None:
+    """Why ``path`` is not a regular file to read (a FIFO, a device, a folder, missing), or ``None``."""
+    import stat
+
+    try:
+        mode = path.stat().st_mode  # follows links: a link to /dev/urandom is a character device
+    except FileNotFoundError:
+        return "is a broken link (its target does not exist)" if path.is_symlink() else "no such file"
+    except OSError as e:
+        return f"cannot be opened ({e.strerror or type(e).__name__})"
+    if stat.S_ISREG(mode):
+        return None
+    target = f" (a link to {os.path.realpath(path)})" if path.is_symlink() else ""
+    for test, what in (
+        (stat.S_ISDIR, "a folder"),
+        (stat.S_ISFIFO, "a FIFO (named pipe)"),
+        (stat.S_ISCHR, "a character device"),
+        (stat.S_ISBLK, "a block device"),
+        (stat.S_ISSOCK, "a socket"),
+    ):
+        if test(mode):
+            return f"is {what}{target}, not a regular file"
+    return f"is not a regular file{target}"
+
+
+def check_regular_file(path, what: str = "file") -> None:
+    """Raise ``ValueError`` (one line naming ``path``) unless it is a regular file: say what it is instead.
+
+    A FIFO, a device such as ``/dev/urandom`` or a folder would hang a reader or feed it without
+    end; a name too long for the file system is refused before any system call fails on it.
+    """
+    from .capture._rules import RuleError, check_path_name
+
+    path = Path(path)
+    try:
+        check_path_name(path)
+    except RuleError as e:
+        raise ValueError(str(e)) from None
+    reason = _not_regular(path)
+    if reason is not None:
+        expected = "" if reason == "no such file" else f"; expected a {what}"
+        raise ValueError(f"{path}: {reason}{expected}")
+
+
+def npy_header(path) -> tuple[tuple[int, ...], np.dtype]:
+    """The shape and dtype a ``.npy`` file declares, read from its header alone (no data read).
+
+    Raises ``ValueError`` naming the file if the header cannot be read. With
+    :func:`wardjax.capture.check_memory` a header claiming 10¹² values is refused before
+    ``np.load`` tries to allocate them.
+    """
+    try:
+        with open(path, "rb") as fh:
+            version = np.lib.format.read_magic(fh)
+            if version == (1, 0):
+                shape, _, dtype = np.lib.format.read_array_header_1_0(fh)
+            else:
+                shape, _, dtype = np.lib.format.read_array_header_2_0(fh)
+    except (ValueError, OSError, EOFError, SyntaxError) as e:
+        first = (str(e).strip().splitlines() or [type(e).__name__])[0][:160]
+        raise ValueError(f"{path}: not a readable .npy file ({first})") from None
+    return tuple(int(k) for k in shape), np.dtype(dtype)
 
 
 # --------------------------------------------------------------------------- encodings
@@ -287,15 +388,45 @@ def _decode(path: Path, suffix: str, data: bytes | None) -> np.ndarray:
     if suffix in (".tif", ".tiff"):
         import tifffile
 
-        return np.asarray(tifffile.imread(io.BytesIO(data)))
+        with tifffile.TiffFile(io.BytesIO(data)) as tif:
+            page = tif.pages[0]
+            _check_pixels(path, page.shape[-3:-1] if page.planarconfig == 2 else page.shape[:2])  # pyright: ignore
+            img = np.asarray(tif.asarray())
+            if page.planarconfig == 2 and img.ndim == 3 and img.shape[0] in (3, 4):  # pyright: ignore
+                img = np.moveaxis(img, 0, -1)  # planar configuration: one plane per channel, read as (H, W, C)
+            return img
     if suffix == ".png":
         import imagecodecs  # Pillow (imageio's default) reduces 16-bit RGB PNG to 8 bits
 
+        if data[12:16] == b"IHDR":  # width and height, big-endian, before anything is decoded
+            _check_pixels(path, (int.from_bytes(data[20:24], "big"), int.from_bytes(data[16:20], "big")))
         return np.asarray(imagecodecs.png_decode(data))
     import imageio.v3 as iio
+    from PIL import Image
+
+    try:
+        with Image.open(io.BytesIO(data)) as im:  # the header only
+            size = im.size
+    except Exception:  # the reader below says why the file cannot be read
+        size = None
+    if size is not None:
+        _check_pixels(path, size[::-1])
 
     # Pillow alone: imageio would otherwise try every plugin it knows on a file Pillow cannot read.
     return np.asarray(iio.imread(data, plugin="pillow"))
+
+
+class _TooLarge(ValueError):
+    """An image whose header declares more pixels than :data:`wardjax.capture.LIMITS` allows."""
+
+
+def _check_pixels(path: Path, hw) -> None:
+    """Refuse, from its header, an image of more pixels than ``LIMITS["pixels"]`` (before decoding it)."""
+    from .capture._rules import LIMITS
+
+    h, w = (int(k) for k in hw)
+    if h * w > LIMITS["pixels"]:
+        raise _TooLarge(f"{w}×{h} pixels is more than the {LIMITS['pixels']:,} allowed")
 
 
 def as_rgb(img: np.ndarray) -> np.ndarray:

@@ -29,6 +29,7 @@ With ``h = ωi + ωo`` (any length), ``tan²δ cos²φ = h_x²/h_z²`` and
 
 from __future__ import annotations
 
+import contextvars
 from typing import Literal, NamedTuple, get_args
 
 import equinox as eqx
@@ -129,6 +130,10 @@ def _as_array(x) -> Array | np.ndarray:
     return np.asarray(x, dtype=float)
 
 
+# Whether WardParams holds its leaves to the physical ranges (off inside WardParams.from_estimate).
+_CHECKED: contextvars.ContextVar[bool] = contextvars.ContextVar("wardjax_ward_params_checked", default=True)
+
+
 class WardParams(eqx.Module):
     """Ward BRDF parameters, a pytree that ``jit``, ``vmap`` and ``grad`` accept.
 
@@ -144,6 +149,14 @@ class WardParams(eqx.Module):
         bitangent ``y``: shape ``(...)``, > 0. Isotropic when equal.
 
     Batched parameters simply carry leading batch axes on every leaf.
+
+    Construction refuses the impossible (:func:`wardjax.capture.check_ward_arrays`): a
+    non-finite leaf, ρd outside [0, 1], ρs < 0, ρd + ρs > 1 in a channel (energy
+    conservation, image-based paper eq. 1), α ≤ 0, raising
+    :class:`~wardjax.capture.RuleError` naming the field. Values traced under
+    ``jit``/``vmap``/``grad`` are not checked (they are not known yet); estimates
+    (a fit's result, which noise may carry past a bound, or a σ) are built with
+    :meth:`from_estimate`.
     """
 
     # Annotated as stored: the converter has made every leaf an array (the constructor takes any array-like).
@@ -151,6 +164,26 @@ class WardParams(eqx.Module):
     rho_s: Float[Array | np.ndarray, "*batch"] | Float[Array | np.ndarray, "*batch 3"] = eqx.field(converter=_as_array)
     alpha_x: Float[Array | np.ndarray, "*batch"] = eqx.field(converter=_as_array)
     alpha_y: Float[Array | np.ndarray, "*batch"] = eqx.field(converter=_as_array)
+
+    def __check_init__(self):
+        if not _CHECKED.get():
+            return
+        leaves = (self.rho_d, self.rho_s, self.alpha_x, self.alpha_y)
+        if any(isinstance(leaf, jax.core.Tracer) for leaf in leaves):
+            return
+        from .capture._rules import check_ward_arrays
+
+        check_ward_arrays(*leaves)
+
+    @classmethod
+    def from_estimate(cls, rho_d, rho_s, alpha_x, alpha_y) -> WardParams:
+        """Parameters as estimated, not held to the physical ranges: a fit's result (NaN where it
+        failed; noise may carry it past a bound) or its 1-σ errors."""
+        token = _CHECKED.set(False)
+        try:
+            return cls(rho_d=rho_d, rho_s=rho_s, alpha_x=alpha_x, alpha_y=alpha_y)
+        finally:
+            _CHECKED.reset(token)
 
     @classmethod
     def isotropic(cls, rho_d, rho_s, alpha) -> WardParams:

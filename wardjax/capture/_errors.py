@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pydantic
 
-from ._rules import one_line
+from ._rules import one_line, shorten
 
 __all__ = ["CAPTURE_FILE", "CaptureError", "pydantic_error"]
 
@@ -26,7 +26,7 @@ class CaptureError(ValueError):
         # Names read from the input (a TOML key, an image path) may hold line breaks: shown escaped, on one line.
         self.file = one_line(file)
         self.field = None if field is None else one_line(field)
-        self.message = one_line(message)
+        self.message = shorten(one_line(message))
         where = f"{self.file}: {self.field}: " if field else f"{self.file}: "
         super().__init__(where + self.message)
 

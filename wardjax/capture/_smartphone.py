@@ -51,7 +51,7 @@ from pydantic import BaseModel, ConfigDict, Field, Strict
 
 from .._files import read_image, sha256
 from ._errors import CAPTURE_FILE, CaptureError, pydantic_error
-from ._rules import RuleError, check_photo_region
+from ._rules import LIMITS, RuleError, check_photo_region
 from ._setup import load_display, load_viewing
 
 __all__ = ["SmartphoneCapture", "SmartphoneCaptureFile", "load_smartphone_capture", "parse_smartphone_file"]
@@ -73,9 +73,12 @@ class PhotoSection(_Section):
 
 
 class ThresholdsSection(_Section):
-    ppb: list[Annotated[int, Field(ge=1, strict=True)]] | None = Field(default=None, min_length=1)
+    # at most LIMITS["list"] observers: each one's threshold is a term of the posterior's likelihood
+    ppb: list[Annotated[int, Field(ge=1, strict=True)]] | None = Field(
+        default=None, min_length=1, max_length=int(LIMITS["list"])
+    )
     ppb_mean: Annotated[_Float, Field(gt=0)] | None = None
-    n_observers: Annotated[int, Field(ge=1, strict=True)] | None = None
+    n_observers: Annotated[int, Field(ge=1, le=int(LIMITS["list"]), strict=True)] | None = None
 
     @pydantic.model_validator(mode="after")
     def _one_form(self):

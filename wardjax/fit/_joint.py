@@ -151,7 +151,7 @@ def combined(res: ScanlineFit, model: str, *, errors: str, max_steps: int, rtol:
     use = np.all(np.sum(wfull > 0, axis=1) >= 3, axis=-1) & (res.status != Status.NONFINITE)
     n_use = int(np.sum(use))
     if n_use == 0:
-        nan = WardParams(rho_d=np.full(3, np.nan), rho_s=np.nan, alpha_x=np.nan, alpha_y=np.nan)
+        nan = WardParams.from_estimate(rho_d=np.full(3, np.nan), rho_s=np.nan, alpha_x=np.nan, alpha_y=np.nan)
         return CombinedFit(
             nan,
             nan,
@@ -232,8 +232,8 @@ def combined(res: ScanlineFit, model: str, *, errors: str, max_steps: int, rtol:
     finite = np.all(np.isfinite(y)) and np.isfinite(chi2) and np.all(np.isfinite(se))
     status = Status.NONFINITE if not finite else (Status.CONVERGED if certified else Status.MAX_STEPS)
     return CombinedFit(
-        params=WardParams(rho_d=rho_d, rho_s=nat[0], alpha_x=ax, alpha_y=ay),
-        stderr=WardParams(rho_d=np.sqrt(rho_d_var), rho_s=se[0], alpha_x=sx, alpha_y=sy),
+        params=WardParams.from_estimate(rho_d=rho_d, rho_s=nat[0], alpha_x=ax, alpha_y=ay),
+        stderr=WardParams.from_estimate(rho_d=np.sqrt(rho_d_var), rho_s=se[0], alpha_x=sx, alpha_y=sy),
         rho_d_scanlines=rho_d_full,
         covariance=cov,
         chi2=chi2,

@@ -406,8 +406,8 @@ def _assemble(sol, data, model, normalization, solver) -> ScanlineFit:
     ay = alpha[:, -1]
     var = np.diagonal(sol.cov, axis1=-2, axis2=-1)
     se = np.sqrt(np.where(var >= 0, var, np.nan))
-    params = WardParams(rho_d=sol.rho_d, rho_s=sol.rho_s, alpha_x=ax, alpha_y=ay)
-    stderr = WardParams(rho_d=se[:, :3], rho_s=se[:, 3], alpha_x=se[:, 4], alpha_y=se[:, -1])
+    params = WardParams.from_estimate(rho_d=sol.rho_d, rho_s=sol.rho_s, alpha_x=ax, alpha_y=ay)
+    stderr = WardParams.from_estimate(rho_d=se[:, :3], rho_s=se[:, 3], alpha_x=se[:, 4], alpha_y=se[:, -1])
     return ScanlineFit(
         params=params,
         stderr=stderr,

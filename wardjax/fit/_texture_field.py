@@ -192,7 +192,7 @@ def with_texture_errors(comb: CombinedFit, te: TextureErrors) -> CombinedFit:
     quad = lambda c: np.einsum("ip,pq,iq->i", grad, c, grad)
     noise_var = np.clip(np.asarray(comb.stderr.rho_d, float) ** 2 - quad(comb.covariance), 0.0, None)
     iso = comb.model == "isotropic"
-    stderr = WardParams(
+    stderr = WardParams.from_estimate(
         rho_d=np.sqrt(noise_var + quad(cov)), rho_s=se[0], alpha_x=se[1], alpha_y=se[1] if iso else se[2]
     )
     return dataclasses.replace(comb, stderr=stderr, covariance=cov, errors="texture_field")

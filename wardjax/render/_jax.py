@@ -118,7 +118,7 @@ def render_rig(
     rd = base if rho_d is None else jnp.asarray(rho_d, dtype)
     rs = jnp.asarray(params.rho_s, dtype)
     rs = jnp.broadcast_to(rs, p.shape) if rs.ndim else jnp.broadcast_to(rs, p.shape[:-1])
-    probe = WardParams(rho_d=rd, rho_s=rs, alpha_x=ax, alpha_y=ay)
+    probe = WardParams.from_estimate(rd, rs, ax, ay)  # per pixel: a measured texture may hold NaN
     f_probe = ward_brdf(probe, local(wi), local(wo), normalization=normalization)
     std = jnp.broadcast_to(jnp.asarray(rho_standard, dtype), p.shape) / jnp.pi
     in_probe = hit & _in_box(p[..., 0], p[..., 1], rig.probe_box())

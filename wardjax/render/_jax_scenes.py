@@ -103,7 +103,7 @@ def _shade(params: WardParams, p, n, t, wo, sources: tuple, normal, *, distant, 
         cos_i = _dot(wi, n[None])
         ok = (cos_i > 0) & (weight > 0)
         widen = omega / (4 * jnp.pi) if source_size else jnp.zeros_like(omega)
-        probe = WardParams(rho_d=rd, rho_s=rs, alpha_x=jnp.sqrt(ax2 + widen), alpha_y=jnp.sqrt(ay2 + widen))
+        probe = WardParams.from_estimate(rd, rs, jnp.sqrt(ax2 + widen), jnp.sqrt(ay2 + widen))
         up = jnp.broadcast_to(jnp.asarray([0.0, 0.0, 1.0], dtype), wi.shape)
         wi_l = jnp.where(ok[..., None], local(wi), up)
         f = ward_brdf(probe, wi_l, wo_l[None], normalization=normalization)

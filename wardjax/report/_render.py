@@ -9,6 +9,7 @@ from pathlib import Path
 
 from .._files import write_bytes_atomic
 from ._collect import load_fits
+from ._validate import validate_fits_dir
 
 __all__ = ["REPORT_SUFFIXES", "write_report"]
 
@@ -37,6 +38,7 @@ def write_report(fits_dir, out, *, timeout: int = 900) -> Path:
     if parent.exists() and not (parent.is_dir() and os.access(parent, os.W_OK)):
         raise ValueError(f"{out}: cannot write there ({parent} is not a writable folder)")
     fits = Path(fits_dir).resolve()
+    validate_fits_dir(fits)  # every file the notebook reads, field by field, before a kernel starts
     load_fits(fits)  # one clear error for an empty or broken folder, before the kernel starts
 
     import nbformat

@@ -39,7 +39,7 @@ from ..export import write_capture_outputs
 from ._fit_capture import fit_capture
 from ._smartphone import fit_smartphone_capture
 
-__all__ = ["BatchItem", "find_captures", "fit_one", "run_batch", "SUMMARY_COLUMNS"]
+__all__ = ["BatchItem", "check_outputs_apart", "find_captures", "fit_one", "run_batch", "SUMMARY_COLUMNS"]
 
 SUMMARY_COLUMNS = (
     "capture",
@@ -87,22 +87,64 @@ class BatchItem:
     params: dict | None = None
 
 
-def find_captures(paths) -> list[Path]:
+def _is_output_folder(folder: Path, out: Path | None) -> bool:
+    """``folder`` is the batch's output folder, or a folder a wardjax fit wrote (a ``summary.csv``
+    beside fitted subfolders): never a capture."""
+    if out is not None and folder.resolve() == out.resolve():
+        return True
+    return (folder / "summary.csv").is_file() and not (folder / CAPTURE_FILE).exists()
+
+
+def find_captures(paths, out=None) -> list[Path]:
     """Capture folders among ``paths``.
 
     A path holding ``capture.toml`` is a capture. A folder without one is a
     folder of captures if it has subfolders (each non-hidden subfolder is a
     capture, broken or not), else it is itself a (broken) capture. Order:
-    as given, subfolders sorted by name.
+    as given, subfolders sorted by name. The output folder ``out`` (and any
+    folder of fits, one holding a ``summary.csv``) is skipped when a folder
+    of captures is scanned.
     """
+    out = None if out is None else Path(out)
     found: list[Path] = []
     for p in map(Path, paths):
         if (p / CAPTURE_FILE).exists() or not p.is_dir():  # a capture, even if its capture.toml is broken
             found.append(p)
             continue
-        subs = sorted(d for d in p.iterdir() if d.is_dir() and not d.name.startswith("."))
+        subs = sorted(
+            d for d in p.iterdir() if d.is_dir() and not d.name.startswith(".") and not _is_output_folder(d, out)
+        )
         found.extend(subs if subs else [p])
     return found
+
+
+def _overlap(a: Path, b: Path) -> bool:
+    return a == b or a.is_relative_to(b) or b.is_relative_to(a)
+
+
+def check_outputs_apart(captures: list[Path], names: list[str], out) -> None:
+    """Refuse a batch whose outputs could touch its inputs: ``OUT/<name>/`` that is, holds or lies in a capture folder.
+
+    Outputs go to ``OUT/<name>/`` under names an input may hold (``rho_d.png``,
+    ``params.json``), so a capture folder and an output folder must not overlap;
+    ``OUT`` itself may lie among the captures (it is skipped when they are scanned).
+
+    Raises
+    ------
+    ValueError
+        One line naming ``--out``, the capture and the folder they share.
+    """
+    out = Path(out)
+    sources = [c.resolve() for c in captures]
+    for name in names:
+        dest = (out / name).resolve()
+        for src, given in zip(sources, captures):
+            if _overlap(dest, src):
+                raise ValueError(
+                    f"--out {out}: the outputs of {name} would go to {out / name}, which "
+                    f"{'is' if dest == src else 'overlaps'} the capture folder {given}; "
+                    "choose an output folder outside every capture folder"
+                )
 
 
 def _names(captures: list[Path]) -> list[str]:
@@ -181,12 +223,29 @@ def _num(x) -> str:
     return "" if x is None else f"{float(x):.6g}"
 
 
+def _earlier_fits(out: Path, names: set[str]) -> list[BatchItem]:
+    """The finished fits in ``out`` from earlier batches: every ``<name>/params.json`` not in ``names``."""
+    found = []
+    for pj in sorted(out.glob("*/params.json")):
+        name = pj.parent.name
+        if name in names or name.startswith("."):
+            continue
+        try:
+            doc = json.loads(pj.read_text())
+            _row(BatchItem(pj.parent, name, "ok", params=doc))  # a document a summary row can be made of
+        except (OSError, ValueError, KeyError, TypeError, AttributeError, IndexError):
+            continue
+        found.append(BatchItem(pj.parent, name, "ok", params=doc))
+    return found
+
+
 def write_summary(path: Path, items: list[BatchItem]) -> None:
-    """``summary.csv``: one row per capture, in batch order (atomic)."""
+    """``summary.csv``: one row per capture of this batch, in batch order, then one per finished fit an
+    earlier batch left in the same folder (every ``params.json``, by name); atomic."""
     buf = io.StringIO()
     wr = csv.DictWriter(buf, fieldnames=SUMMARY_COLUMNS, lineterminator="\n")
     wr.writeheader()
-    for it in items:
+    for it in [*items, *_earlier_fits(path.parent, {it.name for it in items})]:
         wr.writerow(_row(it))
     write_bytes_atomic(path, buf.getvalue().encode())
 
@@ -269,7 +328,9 @@ def run_batch(
     paths
         Capture folders or folders of them (see :func:`find_captures`).
     out
-        Output folder; each capture gets ``out/<name>/``.
+        Output folder; each capture gets ``out/<name>/``. It must not overlap a
+        capture folder (:func:`check_outputs_apart`, ``ValueError`` before anything
+        is written); it may lie among the captures.
     force
         Refit captures that are already finished.
     progress, on_start
@@ -290,9 +351,10 @@ def run_batch(
         In batch order; ``status`` is ``"ok"`` or ``"error"`` with the one-line error.
     """
     out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
-    captures = find_captures(paths)
+    captures = find_captures(paths, out)
     names = _names(captures)
+    check_outputs_apart(captures, names, out)
+    out.mkdir(parents=True, exist_ok=True)
     # Microseconds: ``created`` also tells this batch's commits from an earlier batch's (a retried task
     # skips what this batch already wrote, a rerun skips what an earlier one did), even a second apart.
     created = datetime.datetime.now(datetime.UTC).isoformat(timespec="microseconds").replace("+00:00", "Z")

@@ -117,10 +117,15 @@ def _fail(message: str, code: int = 2) -> None:
     message is escaped so that text like ``[y0, y1, x0, x1]`` is not read as
     rich markup.
     """
-    Console(stderr=True, soft_wrap=True, emoji=False).print(
-        f"[bold red]error:[/] {escape(_one_line(message))}", highlight=False
-    )
+    text = _one_line(message)
+    if len(text) > _MAX_LINE:  # a huge value echoed from the input: the line stays readable
+        text = f"{text[: _MAX_LINE - 40]}… ({len(text):,} characters)"
+    Console(stderr=True, soft_wrap=True, emoji=False).print(f"[bold red]error:[/] {escape(text)}", highlight=False)
     sys.exit(code)
+
+
+# The longest refusal line printed (characters); the rest of a longer one is cut.
+_MAX_LINE = 600
 
 
 def _one_line(text: str) -> str:
@@ -295,6 +300,13 @@ def fit_cmd(
     if missing:
         _fail(f"{missing[0]}: no such capture folder")
     _check_out_dir(out_dir)
+    from ._batch import _names, check_outputs_apart, find_captures
+
+    try:  # outputs never touch inputs: refused before anything is written
+        captures = find_captures(paths, out_dir)
+        check_outputs_apart(captures, _names(captures), out_dir)
+    except ValueError as exc:
+        _fail(str(exc))
     with contextlib.ExitStack() as stack:
         client = None
         if scheduler is not None:
@@ -505,7 +517,8 @@ def texture_analyze(
         )
         model.save(out_path)
     except (ValueError, OSError) as e:
-        _fail(str(e).splitlines()[0])
+        line = (str(e).splitlines() or [type(e).__name__])[0].replace("rho_s: ", f"--rho-s {rho_s:g}: ", 1)
+        _fail(line if str(rho_d_path) in line or str(out_path) in line else f"{rho_d_path}: {line}")
     console.print(f"analysed {model.describe_region()}", highlight=False, soft_wrap=True)
     console.print(
         f"{model.channels} channel(s), {model.height} pyramid levels, {len(model.band_names)} subbands, "

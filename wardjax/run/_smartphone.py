@@ -39,7 +39,7 @@ def fit_smartphone_capture(cap: SmartphoneCapture, out_dir: Path, *, created: st
         )
     except ValueError as e:  # thresholds out of the display's range, a region of one colour…
         raise CaptureError(CAPTURE_FILE, "thresholds", str(e).splitlines()[0]) from None
-    err = WardParams(
+    err = WardParams.from_estimate(
         rho_d=np.asarray(stderr["rho_d"]), rho_s=stderr["rho_s"], alpha_x=stderr["alpha_x"], alpha_y=stderr["alpha_y"]
     )
     return write_smartphone_outputs(

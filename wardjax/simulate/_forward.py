@@ -50,7 +50,7 @@ def capture_radiance(params: WardParams, rig: Rig, rho_d_map, tangent, rho_stand
     rho_d = rho_d_map(np.nan_to_num(x), np.nan_to_num(y))  # (..., 3)
     wi = to_material_frame(g.wi, tangent)
     wo = to_material_frame(g.wo, tangent)
-    p = WardParams(
+    p = WardParams.from_estimate(  # per pixel: the texture's ρd under the checked material
         rho_d=rho_d,
         rho_s=np.asarray(params.rho_s, float),
         alpha_x=np.asarray(params.alpha_x, float),

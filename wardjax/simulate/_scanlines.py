@@ -237,7 +237,7 @@ def simulate_scanlines(
 
     rho_s = np.asarray(params.rho_s, float)
     rs_tail = (3,) if rho_s.shape[-1:] == (3,) and rho_s.ndim == np.ndim(params.rho_d) else ()
-    p = WardParams(
+    p = WardParams.from_estimate(  # the checked material, laid out per scanline
         rho_d=leaf(params.rho_d, (3,))[:, None, :],
         rho_s=leaf(rho_s, rs_tail)[:, None, ...],
         alpha_x=leaf(params.alpha_x, ())[:, None],

@@ -98,7 +98,7 @@ def fit_smartphone(
         **posterior_kwargs,
     )
     alpha = post.median
-    params = WardParams(rho_d=rho_d, rho_s=rho_s, alpha_x=alpha, alpha_y=alpha)
+    params = WardParams.from_estimate(rho_d=rho_d, rho_s=rho_s, alpha_x=alpha, alpha_y=alpha)
     stderr = {
         "rho_d": rho_d_se,
         "rho_s": float(abs(hi - lo) / 4.0),

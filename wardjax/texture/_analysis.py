@@ -7,6 +7,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
+from ..capture._rules import check_rho_sum
 from ._histogram import quantile_probabilities
 from ._jit import texture_jit
 from ._model import TextureModel
@@ -207,6 +208,7 @@ def analyze_texture(
     height = min(DEFAULT_HEIGHT, max_pyramid_height((rh, rw))) if height is None else height
     height = _check_height(height, (rh, rw), "the analysed region")
     rho_s_vec = _rho_s_vector(rho_s, c)
+    check_rho_sum("rho_s", a[y0:y1, x0:x1], rho_s_vec)  # ρd + ρs ≤ 1: energy conservation
 
     shapes = pyramid_shapes((rh, rw), height)
     probs = quantile_probabilities(int(n_quantiles))

@@ -11,6 +11,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ..capture._rules import RuleError
 from ..ward import (
     NORMALIZATIONS,
     WardParams,
@@ -44,6 +45,20 @@ def _extract(f_r, wi, wo, params, normalization):
     return jnp.where(ok, jnp.clip(rho, lo, hi), jnp.nan)
 
 
+def _check_lobe(params: WardParams) -> None:
+    """Refuse a lobe the specular term cannot be evaluated with: ρs finite and ≥ 0, αx, αy finite and > 0.
+
+    ``params`` may come from :meth:`~wardjax.WardParams.from_estimate` (a failed fit is NaN), so the
+    rule is applied here again rather than trusted from construction.
+    """
+    for name in ("rho_s", "alpha_x", "alpha_y"):
+        a = np.asarray(getattr(params, name), np.float64)
+        if not np.all(np.isfinite(a)):
+            raise RuleError(name, f"must be finite to remove the specular lobe, got {a.reshape(-1)[:3].tolist()}")
+        if np.any(a <= 0 if name != "rho_s" else a < 0):
+            raise RuleError(name, f"must be {'≥ 0' if name == 'rho_s' else '> 0'}, got {a.reshape(-1)[:3].tolist()}")
+
+
 def extract_rho_d(f_r, wi, wo, params: WardParams, *, normalization: str = "ward1992") -> np.ndarray:
     """Per-pixel diffuse reflectance ``ρd = π (f_r − specular)``, eq. "ρd,texture".
 
@@ -74,6 +89,7 @@ def extract_rho_d(f_r, wi, wo, params: WardParams, *, normalization: str = "ward
     for name, d in (("wi", wi), ("wo", wo)):
         if np.shape(d) != f_r.shape:
             raise ValueError(f"{name} has shape {np.shape(d)}, expected {f_r.shape} like f_r")
+    _check_lobe(params)
     with jax.enable_x64(True):
         p = jax.tree_util.tree_map(lambda x: jnp.asarray(x, jnp.float64), params)
         out = _extract(jnp.asarray(f_r), jnp.asarray(wi, jnp.float64), jnp.asarray(wo, jnp.float64), p, normalization)

@@ -2,12 +2,14 @@
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 import numpy as np
 
-from .._files import srgb8, write_image
+from .._files import check_regular_file, npy_header, srgb8, write_image
 from ..capture import check_rho_d_map
+from ..capture._rules import RuleError, check_count, check_memory, one_line, shorten
 
 
 def write_texture_image(path, image) -> Path:
@@ -24,31 +26,54 @@ def write_texture_image(path, image) -> Path:
     raise ValueError(f"{path}: unknown image type {path.suffix!r}, expected .tif, .tiff or .png")
 
 
+def _declared(path: Path, suffix: str) -> tuple[tuple[int, ...], np.dtype] | None:
+    """The shape and dtype the file's header declares, before its data are read (``None``: unknown)."""
+    if suffix == ".npy":
+        return npy_header(path)
+    import tifffile
+
+    try:
+        with tifffile.TiffFile(path) as tif:
+            series = tif.series[0]
+            return tuple(int(k) for k in series.shape), np.dtype(series.dtype)
+    except Exception:  # the reader below says why the file cannot be read
+        return None
+
+
 def read_rho_d(path) -> np.ndarray:
     """Read a linear ρd map (``.tif``/``.tiff`` or ``.npy``) as float64 ``(H, W)`` or ``(H, W, C)``.
 
-    Integer images (codes, not reflectances) and maps with values far outside [0, 1] are refused
-    with a note on how to convert them (:func:`wardjax.capture._rules.check_rho_d_map`).
+    Only a regular file is read (a FIFO or a device is named as such); its header's size is held to
+    :data:`wardjax.capture.LIMITS` and the memory available before the data are read. Integer images
+    (codes, not reflectances), complex values and maps outside [0, 1] beyond noise are refused with a
+    note on how to convert them (:func:`wardjax.capture.check_rho_d_map`).
     """
     path = Path(path)
-    if path.is_dir():
-        raise ValueError(f"{path}: is a folder, expected a ρd file (.tif, .tiff or .npy)")
-    if not path.is_file():
-        raise ValueError(f"{path}: no such file")
+    check_regular_file(path, "ρd file (.tif, .tiff or .npy)")
     suffix = path.suffix.lower()
+    if suffix not in (".tif", ".tiff", ".npy"):
+        raise ValueError(f"{path}: unknown ρd file type {path.suffix!r}, expected .tif, .tiff or .npy (linear ρd)")
+    declared = _declared(path, suffix)
+    if declared is not None:
+        shape, dtype = declared
+        try:
+            check_count(str(path), math.prod(shape[:2]), "pixels", "pixels")
+            check_memory(str(path), shape, max(dtype.itemsize, 8), copies=2)
+        except RuleError as e:
+            raise ValueError(str(e)) from None
+        if dtype.kind == "c":  # refused before it is read: no ComplexWarning on the way
+            check_rho_d_map(str(path), np.empty(0, dtype))
     try:
-        if suffix in (".tif", ".tiff"):
+        if suffix == ".npy":
+            a = np.load(path, allow_pickle=False)
+        else:
             import tifffile
 
             a = tifffile.imread(path)
-        elif suffix == ".npy":
-            a = np.load(path, allow_pickle=False)
-        else:
-            raise ValueError(f"{path}: unknown ρd file type {path.suffix!r}, expected .tif, .tiff or .npy (linear ρd)")
     except (OSError, ValueError) as e:
         if str(path) in str(e):
             raise
-        raise ValueError(f"{path}: cannot read ({e})") from None
+        raise ValueError(f"{path}: cannot read ({shorten(one_line(str(e)), 160)})") from None
     if a.ndim not in (2, 3) or not np.issubdtype(a.dtype, np.number):
         raise ValueError(f"{path}: expected an (H, W) or (H, W, C) numeric image, got {a.dtype} {a.shape}")
     check_rho_d_map(str(path), a)  # RuleError names the path
