@@ -16,6 +16,9 @@ that is present in both frames (the background the dark frame removes).
 from __future__ import annotations
 
 import dataclasses
+import os
+import secrets
+import shutil
 from collections.abc import Callable
 from pathlib import Path
 
@@ -23,6 +26,7 @@ import numpy as np
 
 from .._files import encode_image, write_bytes_atomic, write_image, write_json_atomic
 from ..capture import CAPTURE_FILE, Capture, check_ward_params, load_capture
+from ..capture._rules import check_count, check_memory
 from ..export import RADIANCE_NORMALIZATION
 from ..geometry import Camera, Rig, project
 from ..ward import WardParams
@@ -164,6 +168,7 @@ def simulate_capture(
     out = Path(out)
     _check_inputs(params, bit_depth, image_format)
     rig = rig or default_rig(image_size)
+    _check_size(rig.camera.height, rig.camera.width)
     noise = SensorNoise() if noise is None else noise
     rng = np.random.default_rng(seed)
     tex_seed = int(rng.integers(2**31))
@@ -183,29 +188,40 @@ def simulate_capture(
         img += (noise.sigma(img) * rng.standard_normal(img.shape)).astype(np.float32)
 
     ext = {"png": ".png", "tif": ".tif", "jpg": ".jpg"}[image_format]
-    out.mkdir(parents=True, exist_ok=True)
-    for stem, img in (("lit", lit), ("dark", dark_img if dark else None)):
-        if img is not None:
-            write_image(out / f"{stem}{ext}", encode_image(img, encoding, bit_depth))
-    write_image(out / "truth_rho_d.tif", truth)
+    # Written beside ``out`` and loaded there first: a capture the loader refuses (a black lit image,
+    # a rig it does not accept) leaves no file behind.
+    staging = out.parent / f".{out.name}.{secrets.token_hex(4)}.partial"
+    final, out = out, staging
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+        for stem, img in (("lit", lit), ("dark", dark_img if dark else None)):
+            if img is not None:
+                write_image(out / f"{stem}{ext}", encode_image(img, encoding, bit_depth))
+        write_image(out / "truth_rho_d.tif", truth)
 
-    if model is None:
-        model = "isotropic" if float(params.alpha_x) == float(params.alpha_y) else "anisotropic"
-    config = _capture_config(
-        rig, tangent, rho_standard, ext, dark, encoding, bit_depth, name, model, normalization, noise_floor
-    )
-    write_capture_toml(
-        out / CAPTURE_FILE,
-        config,
-        header="Simulated by wardjax.simulate_capture; the truth is in truth.json and truth_rho_d.tif.",
-    )
-    truth_doc = {"params": _params_dict(params, base), "normalization": normalization, "renderer": renderer}
-    truth_doc |= {"texture": tex_name, "texture_amplitude": texture_amplitude, "seed": seed, "exposure": exposure}
-    truth_doc |= {"ambient": ambient, "noise": {"read": noise.read, "shot": noise.shot}}
-    write_json_atomic(out / "truth.json", truth_doc | {"tangent": list(map(float, tangent))})
-    cap = load_capture(out)
+        if model is None:
+            model = "isotropic" if float(params.alpha_x) == float(params.alpha_y) else "anisotropic"
+        config = _capture_config(
+            rig, tangent, rho_standard, ext, dark, encoding, bit_depth, name, model, normalization, noise_floor
+        )
+        write_capture_toml(
+            out / CAPTURE_FILE,
+            config,
+            header="Simulated by wardjax.simulate_capture; the truth is in truth.json and truth_rho_d.tif.",
+        )
+        truth_doc = {"params": _params_dict(params, base), "normalization": normalization, "renderer": renderer}
+        truth_doc |= {"texture": tex_name, "texture_amplitude": texture_amplitude, "seed": seed, "exposure": exposure}
+        truth_doc |= {"ambient": ambient, "noise": {"read": noise.read, "shot": noise.shot}}
+        write_json_atomic(out / "truth.json", truth_doc | {"tangent": list(map(float, tangent))})
+        load_capture(out)
+        final.mkdir(parents=True, exist_ok=True)
+        for f in sorted(staging.iterdir()):
+            os.replace(f, final / f.name)
+    finally:
+        shutil.rmtree(staging, ignore_errors=True)
+    cap = load_capture(final)
     if not isinstance(cap, Capture):  # the folder just written has method = "scanline"
-        raise RuntimeError(f"{out}: the simulated capture did not load as a scanline capture")
+        raise RuntimeError(f"{final}: the simulated capture did not load as a scanline capture")
     return cap
 
 
@@ -305,6 +321,16 @@ def _check_renderer(renderer: str, normalization: str | None) -> str:
             raise ValueError(f"renderer='radiance' draws the {RADIANCE_NORMALIZATION!r} Ward, got {normalization!r}")
         return RADIANCE_NORMALIZATION
     return "ward1992" if normalization is None else normalization
+
+
+def _check_size(height: int, width: int) -> None:
+    """Refuse, before rendering, an image of more pixels than ``LIMITS["pixels"]`` or than memory holds.
+
+    Rendering keeps about eight ``(H, W, 3)`` float32 images at once (radiance, ambient, truth, lit,
+    dark and their noise).
+    """
+    check_count("image_size", height * width, "pixels", "pixels")
+    check_memory("image_size", (height, width, 3), 4, copies=8)
 
 
 def _check_inputs(params: WardParams, bit_depth: int, image_format: str) -> None:

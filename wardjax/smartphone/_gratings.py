@@ -97,16 +97,18 @@ def write_gratings(
     The CSV lists each file with its PPB and the cycles per degree at the eye for
     ``viewing``. Returns the PNG paths, coarsest-bar last.
     """
-    d = load_display(display)
+    d, v = load_display(display), load_viewing(viewing)
+    if orientation not in ("vertical", "horizontal"):
+        raise ValueError(f"orientation={orientation!r}, expected 'vertical' or 'horizontal'")
+    # every value computed (and every refusal made) before the first file is written
+    rows = [(f"grating_{ppb:03d}.png", ppb, float(ppb_to_cpd(ppb, d, v))) for ppb in range(d.ppb_min, d.ppb_max + 1)]
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     paths = []
-    rows = []
-    for ppb in range(d.ppb_min, d.ppb_max + 1):
-        path = out / f"grating_{ppb:03d}.png"
+    for name, ppb, _ in rows:
+        path = out / name
         write_image(path, grating_image(ppb, d.width_px, d.height_px, orientation=orientation))
         paths.append(path)
-        rows.append((path.name, ppb, float(ppb_to_cpd(ppb, d, viewing))))
     buf = io.StringIO()
     w = csv.writer(buf)
     w.writerow(["file", "ppb", "cycles_per_degree"])
