@@ -43,6 +43,7 @@ __all__ = [
     "decode_values",
     "encode_image",
     "encode_values",
+    "file_problem",
     "as_rgb",
     "jsonable",
     "npy_header",
@@ -234,10 +235,11 @@ def sha256(path) -> str:
 # --------------------------------------------------------------------------- input files
 
 
-def _not_regular(path: Path) -> str | None:
+def file_problem(path) -> str | None:
     """Why ``path`` is not a regular file to read (a FIFO, a device, a folder, missing), or ``None``."""
     import stat
 
+    path = Path(path)
     try:
         mode = path.stat().st_mode  # follows links: a link to /dev/urandom is a character device
     except FileNotFoundError:
@@ -272,7 +274,7 @@ def check_regular_file(path, what: str = "file") -> None:
         check_path_name(path)
     except RuleError as e:
         raise ValueError(str(e)) from None
-    reason = _not_regular(path)
+    reason = file_problem(path)
     if reason is not None:
         expected = "" if reason == "no such file" else f"; expected a {what}"
         raise ValueError(f"{path}: {reason}{expected}")

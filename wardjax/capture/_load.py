@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .._files import RAW_SUFFIXES, decode_lut, sha256
+from .._files import RAW_SUFFIXES, decode_lut, file_problem, sha256
 from ..geometry import Camera, Rig
 from ._errors import CAPTURE_FILE, CaptureError
 from ._images import CaptureImages, ImageSource, Window, open_image
@@ -100,8 +100,10 @@ def _open_image(folder: Path, name: str, field: str, cfg: CaptureFile) -> tuple[
     check_relative(name, field)
     if path.is_dir():
         raise CaptureError(name, None, f"is a folder, expected an image file (named by {CAPTURE_FILE} {field})")
-    if not path.is_file():
+    if (problem := file_problem(path)) == "no such file":
         raise CaptureError(name, None, f"image file is missing (named by {CAPTURE_FILE} {field})")
+    if problem is not None:
+        raise CaptureError(name, None, f"{problem}; expected an image file (named by {CAPTURE_FILE} {field})")
     suffix = path.suffix.lower()
     if suffix not in IMAGE_SUFFIXES:
         raise CaptureError(

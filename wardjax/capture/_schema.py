@@ -53,6 +53,7 @@ greater than 0 (got -5.0)``.
 
 from __future__ import annotations
 
+import math
 import tomllib
 from pathlib import Path
 from typing import Annotated, Any, Literal
@@ -61,8 +62,9 @@ import numpy as np
 import pydantic
 from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, Strict
 
+from .._files import file_problem
 from ._errors import CAPTURE_FILE, CaptureError, pydantic_error
-from ._rules import LIMITS, RuleError, check_focal_px, check_position
+from ._rules import LIMITS, RuleError, check_count, check_focal_px, check_position
 from ._smartphone import SmartphoneCaptureFile, parse_smartphone_file
 
 __all__ = ["CaptureFile", "parse_capture_file", "unit_direction"]
@@ -172,6 +174,7 @@ def _check_physics(cfg: CaptureFile) -> None:
     """Checks across fields that pydantic's per-field validation cannot make."""
     f = CAPTURE_FILE
     try:
+        check_count("camera.image_size", math.prod(cfg.camera.image_size), "pixels", "pixels")
         check_position("rig.lamp", cfg.rig.lamp)
         check_position("rig.camera", cfg.rig.camera)
         check_position("camera.look_at", cfg.camera.look_at)
@@ -226,8 +229,10 @@ def parse_capture_file(path: Path) -> CaptureFile | SmartphoneCaptureFile:
     f = CAPTURE_FILE
     if path.is_dir():
         raise CaptureError(f, None, f"is a folder in {path.parent}, expected the capture's TOML file")
-    if not path.is_file():
+    if (problem := file_problem(path)) == "no such file":
         raise CaptureError(f, None, f"missing: no {CAPTURE_FILE} in {path.parent}")
+    if problem is not None:
+        raise CaptureError(f, None, f"{problem} in {path.parent}; expected the capture's TOML file")
     try:
         raw = tomllib.loads(path.read_text(encoding="utf-8"))
     except OSError as e:

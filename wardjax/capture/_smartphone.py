@@ -49,7 +49,7 @@ import numpy as np
 import pydantic
 from pydantic import BaseModel, ConfigDict, Field, Strict
 
-from .._files import read_image, sha256
+from .._files import file_problem, read_image, sha256
 from ._errors import CAPTURE_FILE, CaptureError, pydantic_error
 from ._rules import LIMITS, RuleError, check_photo_region
 from ._setup import load_display, load_viewing
@@ -184,8 +184,10 @@ def load_smartphone_capture(folder: Path, cfg: SmartphoneCaptureFile) -> Smartph
     path = folder / cfg.photo.file
     if path.is_dir():
         raise CaptureError(CAPTURE_FILE, "photo.file", f"{cfg.photo.file!r} is a folder, expected an image file")
-    if not path.is_file():
+    if (problem := file_problem(path)) == "no such file":
         raise CaptureError(CAPTURE_FILE, "photo.file", f"{cfg.photo.file!r} does not exist in {folder}")
+    if problem is not None:
+        raise CaptureError(CAPTURE_FILE, "photo.file", f"{cfg.photo.file!r} {problem}; expected an image file")
     try:
         photo = read_image(path)
     except (OSError, ValueError, RuntimeError) as e:

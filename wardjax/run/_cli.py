@@ -7,6 +7,7 @@ rather than a traceback.
 
 from __future__ import annotations
 
+import os
 import sys
 from pathlib import Path
 
@@ -139,6 +140,12 @@ def _one_line(text: str) -> str:
         ch.encode("unicode_escape").decode("ascii") if unicodedata.category(ch) in ("Cc", "Zl", "Zp") else ch
         for ch in text
     )
+
+
+def _check_name_length(path: Path) -> None:
+    """Refuse a path with a component longer than file systems allow (255 bytes), before it is looked up."""
+    if any(len(os.fsencode(part)) > 255 for part in path.parts):
+        _fail(f"{path}: a path component is longer than the 255 bytes file systems allow")
 
 
 def _check_out_dir(path: Path) -> None:
@@ -296,6 +303,8 @@ def fit_cmd(
     from ._batch import scanline_note
 
     err = Console(stderr=True, emoji=False)
+    for p in paths:
+        _check_name_length(p)
     missing = [str(p) for p in paths if not p.exists()]
     if missing:
         _fail(f"{missing[0]}: no such capture folder")
@@ -643,6 +652,7 @@ def diagnose_cmd(capture: Path, out_dir: Path, max_steps: int, max_samples: int 
     from ..effects import ScanlineModel, discover
     from ..effects._capture import capture_data
 
+    _check_name_length(capture)
     if not capture.exists():
         _fail(f"{capture}: no such capture folder")
     _check_out_dir(out_dir)
