@@ -288,15 +288,17 @@ def test_rules_against_closed_forms():
 
 
 def test_python_api_applies_the_same_rules(tmp_path):
-    for bad, field in (
-        (wj.WardParams(rho_d=(1.5, 0.5, 0.5), rho_s=0.04, alpha_x=0.1, alpha_y=0.1), "rho_d"),
-        (wj.WardParams(rho_d=(0.5, 0.5, 0.5), rho_s=-0.1, alpha_x=0.1, alpha_y=0.1), "rho_s"),
-        (wj.WardParams(rho_d=(0.9, 0.9, 0.9), rho_s=0.2, alpha_x=0.1, alpha_y=0.1), "rho_s"),
-        (wj.WardParams(rho_d=(0.5, 0.5, 0.5), rho_s=0.04, alpha_x=0.0, alpha_y=0.1), "alpha_x"),
-        (wj.WardParams(rho_d=(0.5, 0.5, 0.5), rho_s=0.04, alpha_x=0.1, alpha_y=float("nan")), "alpha_y"),
+    """WardParams refuses what capture.toml and the CLI refuse, at construction: nothing is simulated or written."""
+    good = dict(rho_d=(0.5, 0.5, 0.5), rho_s=0.04, alpha_x=0.1, alpha_y=0.1)
+    for edit, field in (
+        (dict(rho_d=(1.5, 0.5, 0.5)), "rho_d"),
+        (dict(rho_s=-0.1), "rho_s"),
+        (dict(rho_d=(0.9, 0.9, 0.9), rho_s=0.2), "rho_s"),
+        (dict(alpha_x=0.0), "alpha_x"),
+        (dict(alpha_y=float("nan")), "alpha_y"),
     ):
         with pytest.raises(RuleError) as info:
-            wj.simulate_capture(bad, tmp_path / "sim", image_size=(32, 24))
+            wj.simulate_capture(wj.WardParams(**(good | edit)), tmp_path / "sim", image_size=(32, 24))
         assert info.value.field == field
         assert not (tmp_path / "sim").exists()
 

@@ -26,6 +26,7 @@ import json
 import math
 import re
 import shutil
+from collections.abc import Callable
 from pathlib import Path
 
 import imagecodecs
@@ -39,7 +40,7 @@ from hypothesis import strategies as st
 from hypothesis.database import DirectoryBasedExampleDatabase
 
 import wardjax as wj
-from wardjax.capture import CaptureError, check_focal_px, load_capture, one_line
+from wardjax.capture import CaptureError, RuleError, check_focal_px, load_capture, one_line
 from wardjax.capture._rules import MAX_DISTANCE_MM
 from wardjax.capture._setup import load_display
 from wardjax.texture import TextureModel
@@ -700,3 +701,186 @@ def test_cli_arguments_quick(work, spec):
 @slow(1500)
 def test_cli_arguments_slow(work, spec):
     _cli(work, spec)
+
+
+# --------------------------------------------------------------------------- library constructors
+
+# A leaf of WardParams as a user may pass it: a number of any kind, a short list, a nested list, text.
+LEAVES = st.one_of(
+    NUMBERS,
+    st.booleans(),
+    st.complex_numbers(),
+    st.text(max_size=3),
+    st.lists(NUMBERS, min_size=0, max_size=4),
+    st.lists(st.lists(st.floats(-2, 2), min_size=3, max_size=3), min_size=1, max_size=3),
+    st.lists(st.one_of(NUMBERS, st.lists(NUMBERS, max_size=2)), min_size=1, max_size=3),  # ragged
+)
+PHYSICAL = st.floats(0, 1)
+
+
+def _ward_rules_hold(p: wj.WardParams) -> None:
+    """What a built WardParams holds, checked from the physics: finite; ρd ∈ [0, 1]; ρs ≥ 0; ρd + ρs ≤ 1; α > 0."""
+    leaves = {k: np.asarray(getattr(p, k)) for k in ("rho_d", "rho_s", "alpha_x", "alpha_y")}
+    for k, a in leaves.items():
+        assert a.dtype.kind == "f" and np.all(np.isfinite(a)), (k, a)
+    d, s = leaves["rho_d"], leaves["rho_s"]
+    assert np.all((d >= 0) & (d <= 1)) and np.all(s >= 0)
+    assert np.all(leaves["alpha_x"] > 0) and np.all(leaves["alpha_y"] > 0)
+    try:
+        total = d + (s[..., None] if s.ndim < d.ndim else s)
+    except ValueError:
+        return
+    assert np.all(total <= 1 + 1e-12), total
+
+
+def _construct(leaves: dict) -> None:
+    try:
+        p = wj.WardParams(**leaves)
+    except RuleError as e:
+        assert e.field in leaves, e
+        assert is_one_line(str(e)) and len(str(e)) < 700, str(e)
+        return
+    _ward_rules_hold(p)
+
+
+@given(rho_d=LEAVES, rho_s=LEAVES, alpha_x=LEAVES, alpha_y=LEAVES)
+@example(rho_d=[0.5, 0.5, 0.5], rho_s=-1.0, alpha_x=0.1, alpha_y=0.1)  # built before the rules applied here
+@example(rho_d=[0.5, 0.5, 0.5], rho_s=0.04, alpha_x=True, alpha_y=0.1)  # a boolean read as 1.0
+@example(rho_d=[0.5, 0.5, 0.5], rho_s=0.04, alpha_x=1j, alpha_y=0.1)  # TypeError from the float converter
+@QUICK
+def test_ward_params_constructor_quick(rho_d, rho_s, alpha_x, alpha_y):
+    _construct(dict(rho_d=rho_d, rho_s=rho_s, alpha_x=alpha_x, alpha_y=alpha_y))
+
+
+@given(rho_d=st.lists(PHYSICAL, min_size=3, max_size=3), rho_s=PHYSICAL, alpha=st.floats(1e-4, 2))
+@QUICK
+def test_ward_params_physical_values_build_quick(rho_d, rho_s, alpha):
+    """Every physical material builds; one that breaks energy conservation is refused on ``rho_s``."""
+    leaves = dict(rho_d=rho_d, rho_s=rho_s, alpha_x=alpha, alpha_y=alpha)
+    if max(rho_d) + rho_s <= 1:
+        _ward_rules_hold(wj.WardParams(**leaves))
+    else:
+        with pytest.raises(RuleError, match="^rho_s: "):
+            wj.WardParams(**leaves)
+
+
+@pytest.mark.slow
+@given(rho_d=LEAVES, rho_s=LEAVES, alpha_x=LEAVES, alpha_y=LEAVES)
+@slow(3000)
+def test_ward_params_constructor_slow(rho_d, rho_s, alpha_x, alpha_y):
+    _construct(dict(rho_d=rho_d, rho_s=rho_s, alpha_x=alpha_x, alpha_y=alpha_y))
+
+
+# --------------------------------------------------------------------------- report inputs
+
+
+@pytest.fixture(scope="module")
+def fits(tmp_path_factory) -> _Work:
+    """A folder of fits in ``wardjax fit``'s layout (one scanline and one smartphone capture) and its documents."""
+    from test_corpus import _write_fits
+
+    root = tmp_path_factory.mktemp("fits")
+    folder = _write_fits(root / "fits")
+    docs = {n: json.loads((folder / n / "params.json").read_text()) for n in ("scan", "phone")}
+    npz = {}
+    for name, file in (("scan", "residuals.npz"), ("phone", "posterior.npz")):
+        with np.load(folder / name / file) as z:
+            npz[file] = {k: z[k] for k in z.files}
+    return _Work(root=folder, docs=docs, npz=npz)
+
+
+def _report_reads(folder: Path) -> None:
+    """What the report's content reads of each capture's files: every value formatted, every table built."""
+    from wardjax.report import load_fits
+    from wardjax.report._collect import PARAMETERS, flag_outliers, load_chains
+    from wardjax.report._figures import residual_figure
+    from wardjax.report._sections import _chain_table, _errors_table
+
+    results = load_fits(folder)
+    flag_outliers(results)
+    for r in results:
+        shown = ["{:.4f} ± {:.2g}".format(*r.value(k)) for k in PARAMETERS]
+        shown += [f"{v:.4f}" for v in r.doc["params"]["rho_d"]] + [f"{v:.2g}" for v in r.doc["stderr"]["rho_d"]]
+        _errors_table(r)
+        _chain_table(r)
+        load_chains(r)
+        if (r.folder / "residuals.npz").exists():
+            residual_figure(r)
+
+
+def _report_input(fits: _Work, write: Callable[[Path], None]) -> None:
+    """Write one edited input; the report's validation refuses it on one line naming the file, or it reads cleanly."""
+    from wardjax.report._validate import validate_fits_dir
+
+    folder = fits["root"].parent / "edited"
+    if folder.exists():
+        shutil.rmtree(folder)
+    shutil.copytree(fits["root"], folder)
+    write(folder)
+    try:
+        validate_fits_dir(folder)
+    except ValueError as e:
+        text = str(e)
+        assert is_one_line(text) and len(text) < 700, text
+        assert text.startswith(str(folder)), text
+        return
+    _report_reads(folder)
+
+
+def _params_edit(fits: _Work, name: str, edits) -> None:
+    doc = apply_edits(fits["docs"][name], edits)
+    _report_input(fits, lambda f: (f / name / "params.json").write_text(json.dumps(doc)))
+
+
+ARRAYS = st.one_of(
+    st.lists(st.floats(), max_size=6).map(np.asarray),
+    st.lists(st.integers(-5, 5), max_size=4).map(lambda v: np.asarray(v, np.int64)),
+    st.sampled_from(
+        [np.zeros((0, 3)), np.ones((2, 2, 3)), np.ones((3, 4)), np.array("x"), np.int64(0), np.float64(1.5)]
+    ),
+    st.tuples(st.integers(0, 4), st.integers(0, 4), st.integers(1, 4)).map(lambda s: np.ones(s, np.float32)),
+)
+
+
+def _npz_edit(fits: _Work, file: str, edits) -> None:
+    arrays = dict(fits["npz"][file])
+    keys = sorted(arrays)
+    for index, value in edits:
+        key = keys[index % len(keys)]
+        if value is None:
+            arrays.pop(key, None)
+        else:
+            arrays[key] = value
+    buf = io.BytesIO()
+    np.savez(buf, **arrays)
+    name = "scan" if file == "residuals.npz" else "phone"
+    _report_input(fits, lambda f: (f / name / file).write_bytes(buf.getvalue()))
+
+
+NPZ_EDITS = st.lists(st.tuples(st.integers(0, 10), st.one_of(st.none(), ARRAYS)), min_size=1, max_size=3)
+
+
+@given(name=st.sampled_from(["scan", "phone"]), edits=EDITS)
+@settings(QUICK, max_examples=80)
+def test_report_params_json_quick(fits, name, edits):
+    _params_edit(fits, name, edits)
+
+
+@given(file=st.sampled_from(["residuals.npz", "posterior.npz"]), edits=NPZ_EDITS)
+@settings(QUICK, max_examples=30)
+def test_report_npz_quick(fits, file, edits):
+    _npz_edit(fits, file, edits)
+
+
+@pytest.mark.slow
+@given(name=st.sampled_from(["scan", "phone"]), edits=EDITS)
+@slow(2000)
+def test_report_params_json_slow(fits, name, edits):
+    _params_edit(fits, name, edits)
+
+
+@pytest.mark.slow
+@given(file=st.sampled_from(["residuals.npz", "posterior.npz"]), edits=NPZ_EDITS)
+@slow(500)
+def test_report_npz_slow(fits, file, edits):
+    _npz_edit(fits, file, edits)

@@ -240,6 +240,8 @@ def file_problem(path) -> str | None:
     import stat
 
     path = Path(path)
+    if any(len(os.fsencode(part)) > 255 for part in path.parts):
+        return "has a path component longer than the 255 bytes file systems allow"
     try:
         mode = path.stat().st_mode  # follows links: a link to /dev/urandom is a character device
     except FileNotFoundError:

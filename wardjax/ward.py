@@ -124,10 +124,22 @@ _COS_EPS = 1e-12
 
 
 def _as_array(x) -> Array | np.ndarray:
-    """Keep arrays (and tracers) as they are; turn Python numbers and sequences into NumPy."""
+    """Keep arrays (and tracers) as they are; turn Python numbers and sequences into NumPy floats.
+
+    What is not a real number (a boolean, text, a complex number, a ragged list) is kept as it
+    is, for the range check to refuse by name.
+    """
     if isinstance(x, (jax.Array, np.ndarray)):
         return x
-    return np.asarray(x, dtype=float)
+    if isinstance(x, bool):
+        return np.asarray(x)
+    try:
+        return np.asarray(x, dtype=float)
+    except (TypeError, ValueError):
+        try:
+            return np.asarray(x)
+        except ValueError:  # a ragged sequence
+            return np.asarray(x, dtype=object)
 
 
 # Whether WardParams holds its leaves to the physical ranges (off inside WardParams.from_estimate).

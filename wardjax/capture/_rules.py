@@ -307,7 +307,7 @@ def check_rho_d_map(name: str, a: np.ndarray) -> None:
         )
 
 
-def _first_bad(values: np.ndarray, bad: np.ndarray) -> str:
+def _first_bad(values: np.ndarray, bad: np.ndarray | np.bool_) -> str:
     """``"k of n values, e.g. v"``: how many of ``values`` are ``bad``, and the first of them."""
     first = float(values[bad].reshape(-1)[0])
     if values.size == 1:
@@ -318,23 +318,24 @@ def _first_bad(values: np.ndarray, bad: np.ndarray) -> str:
 def check_ward_arrays(rho_d, rho_s, alpha_x, alpha_y) -> None:
     """:func:`check_ward_params` for arrays of any batch shape (the rule :class:`~wardjax.WardParams` applies).
 
-    Every leaf finite; ρd in [0, 1]; ρs ≥ 0; ρd + ρs ≤ 1 per channel (broadcast over the batch
-    where the shapes allow); αx, αy > 0. The message counts the values outside and shows the first.
+    Field by field, in the order of :func:`check_ward_params`: ρd finite and in [0, 1]; ρs finite
+    and ≥ 0, and ρd + ρs ≤ 1 per channel (broadcast over the batch where the shapes allow); αx,
+    αy finite and > 0. The message counts the values outside and shows the first.
     """
-    leaves = {"rho_d": rho_d, "rho_s": rho_s, "alpha_x": alpha_x, "alpha_y": alpha_y}
-    arrays = {}
-    for name, v in leaves.items():
+
+    def real(name: str, v) -> np.ndarray:
         a = np.asarray(v)
-        if np.iscomplexobj(a) or not (np.issubdtype(a.dtype, np.number) or a.dtype == np.bool_):
+        if np.iscomplexobj(a) or a.dtype == np.bool_ or not np.issubdtype(a.dtype, np.number):
             raise RuleError(name, f"expected real numbers, got {a.dtype}")
         a = a.astype(np.float64, copy=False)
-        bad = ~np.isfinite(a)
-        if bad.any():
+        if (bad := ~np.isfinite(a)).any():
             raise RuleError(name, f"must be finite: {_first_bad(a, bad)}")
-        arrays[name] = a
-    d, s = arrays["rho_d"], arrays["rho_s"]
+        return a
+
+    d = real("rho_d", rho_d)
     if (bad := (d < 0) | (d > 1)).any():
         raise RuleError("rho_d", f"must lie in [0, 1]: {_first_bad(d, bad)}")
+    s = real("rho_s", rho_s)
     if (bad := s < 0).any():
         raise RuleError("rho_s", f"must be ≥ 0: {_first_bad(s, bad)}")
     s_rgb = s[..., None] if s.ndim < d.ndim else s
@@ -346,8 +347,8 @@ def check_ward_arrays(rho_d, rho_s, alpha_x, alpha_y) -> None:
         raise RuleError(
             "rho_s", f"rho_d + rho_s must be ≤ 1 in every channel (energy conservation): {_first_bad(total, bad)}"
         )
-    for name in ("alpha_x", "alpha_y"):
-        a = arrays[name]
+    for name, v in (("alpha_x", alpha_x), ("alpha_y", alpha_y)):
+        a = real(name, v)
         if (bad := a <= 0).any():
             raise RuleError(name, f"must be > 0 (a slope standard deviation): {_first_bad(a, bad)}")
 

@@ -7,7 +7,7 @@ import re
 import tempfile
 from pathlib import Path
 
-from .._files import write_bytes_atomic
+from .._files import check_writable_file, write_bytes_atomic
 from ._collect import load_fits
 from ._validate import validate_fits_dir
 
@@ -34,6 +34,7 @@ def write_report(fits_dir, out, *, timeout: int = 900) -> Path:
     out = Path(out)
     if out.suffix.lower() not in REPORT_SUFFIXES:
         raise ValueError(f"{out}: unknown report type {out.suffix!r}, expected .html or .ipynb")
+    check_writable_file(out)  # a name too long, a folder: before the notebook runs
     parent = out.resolve().parent
     if parent.exists() and not (parent.is_dir() and os.access(parent, os.W_OK)):
         raise ValueError(f"{out}: cannot write there ({parent} is not a writable folder)")

@@ -4,17 +4,17 @@ What the report reads of each finished capture (``<name>/`` in the folder of fit
 
 * ``params.json``: schema ``wardjax.params/1``; ``method``, ``model``,
   ``normalization`` as text; ``params`` and ``stderr`` each holding ``rho_d``
-  (3 numbers), ``rho_s`` (1 or 3), ``alpha_x``, ``alpha_y`` (numbers, ``null``
-  where a fit failed; every ``stderr`` ≥ 0); ``fit`` a table whose optional
+  (3 numbers), ``rho_s`` (1 or 3), ``alpha_x``, ``alpha_y`` (finite numbers:
+  the report prints each; every ``stderr`` ≥ 0); ``fit`` a table whose optional
   ``status`` is text, ``reduced_chi2`` a number, ``covariance.parameters``
-  names, ``diagnostics.errors`` a list of 1-σ per error model, one per name,
-  ``posterior`` the α intervals;
+  names of shared parameters, ``diagnostics.errors`` the 1-σ of each by each
+  error model, ``posterior`` the α median, intervals, acceptance and τ;
 * ``residuals.npz`` (optional): ``f_r`` and ``model`` of one ``(h, w, 3)``
   shape, ``binning`` a whole number ≥ 1, ``origin`` two whole numbers;
 * ``posterior.npz`` (optional): ``alpha`` (and any other chain) of one
-  ``(steps, walkers)`` shape, finite; ``thin`` a whole number ≥ 1;
+  ``(steps, walkers)`` shape, finite and not constant; ``thin`` a whole number ≥ 1;
 * ``texture.json`` (optional): a texture description
-  :meth:`~wardjax.TextureModel.load` reads;
+  :meth:`~wardjax.TextureModel.load` reads; ``rho_d.tif`` (optional): a float image;
 * ``report.json`` (optional, from ``wardjax diagnose``): ``gap`` numbers and
   ``found`` names.
 
@@ -26,7 +26,7 @@ from __future__ import annotations
 import json
 import zipfile
 from pathlib import Path
-from typing import Annotated, Any
+from typing import Annotated, Any, Literal
 
 import numpy as np
 import pydantic
@@ -50,36 +50,51 @@ class _Open(BaseModel):
 
 
 class _Params(_Open):
-    rho_d: tuple[_Num | None, _Num | None, _Num | None]
-    rho_s: _Num | None | tuple[_Num | None, _Num | None, _Num | None]
-    alpha_x: _Num | None
-    alpha_y: _Num | None
+    rho_d: tuple[_Num, _Num, _Num]
+    rho_s: _Num | tuple[_Num, _Num, _Num]
+    alpha_x: _Num
+    alpha_y: _Num
 
 
 class _Stderr(_Open):
-    rho_d: tuple[_Err | None, _Err | None, _Err | None]
-    rho_s: _Err | None | tuple[_Err | None, _Err | None, _Err | None]
-    alpha_x: _Err | None
-    alpha_y: _Err | None
+    rho_d: tuple[_Err, _Err, _Err]
+    rho_s: _Err | tuple[_Err, _Err, _Err]
+    alpha_x: _Err
+    alpha_y: _Err
 
 
 class _Posterior(_Open):
     alpha_median: _Num
     alpha_interval_68: tuple[_Num, _Num]
     alpha_interval_95: tuple[_Num, _Num]
+    acceptance: Annotated[_Num, Field(ge=0, le=1)]
+    autocorrelation_time: Annotated[_Num, Field(gt=0)]
+    n_steps: Annotated[int, Strict(), Field(ge=1)] | None = None
+    n_walkers: Annotated[int, Strict(), Field(ge=1)] | None = None
+    effective_samples: _Err | None = None
+
+    @pydantic.model_validator(mode="after")
+    def _chain_length_whole(self):
+        if self.n_steps is not None and (self.n_walkers is None or self.effective_samples is None):
+            raise ValueError("fit.posterior: n_steps needs n_walkers and effective_samples beside it")
+        return self
+
+
+# The shared parameters a scanline fit's covariance may name (``alpha``: the isotropic α).
+_SHARED = Literal["rho_s", "alpha", "alpha_x", "alpha_y"]
 
 
 class _Covariance(_Open):
-    parameters: list[str]
+    parameters: list[_SHARED]
 
 
 class _Errors(_Open):
     """``fit.diagnostics.errors``: 1-σ of the shared parameters by error model, in ``covariance.parameters`` order."""
 
     reported: str | None = None
-    texture_field: list[_Err | None] | None = None
-    scanline_sandwich: list[_Err | None] | None = None
-    model: list[_Err | None] | None = None
+    texture_field: list[_Err]
+    scanline_sandwich: list[_Err]
+    model: list[_Err]
 
 
 class _Diagnostics(_Open):
@@ -199,8 +214,8 @@ def _residuals(path: Path) -> None:
 def _posterior(path: Path) -> None:
     z = _npz(path)
     alpha = _array(path, z, "alpha", 2)
-    if 0 in alpha.shape:
-        raise ValueError(f"{path}: alpha: no steps or walkers (shape {alpha.shape})")
+    if min(alpha.shape) < 2:
+        raise ValueError(f"{path}: alpha: expected at least 2 steps of 2 walkers, got shape {alpha.shape}")
     for key, a in z.items():
         if key == "thin":
             _whole(path, z, "thin", 1, 1)
@@ -209,6 +224,17 @@ def _posterior(path: Path) -> None:
             raise ValueError(f"{path}: {key}: expected {want}, got {a.dtype} {a.shape}")
         elif not np.all(np.isfinite(a)):
             raise ValueError(f"{path}: {key}: holds non-finite values")
+        elif a.max() == a.min():  # a corner plot needs a spread to draw
+            raise ValueError(f"{path}: {key}: every sample is {a.flat[0]:g}; a chain has a spread")
+
+
+def _tif(path: Path) -> None:
+    from ..texture._images import _declared
+
+    _read_bytes(path)
+    shape, dtype = _declared(path, ".tif")
+    if len(shape) not in (2, 3) or dtype.kind != "f":
+        raise ValueError(f"{path}: expected a float (H, W[, C]) ρd image, got {dtype} {shape}")
 
 
 def _texture(path: Path) -> None:
@@ -226,7 +252,8 @@ def validate_fit_folder(folder: Path) -> None:
     folder = Path(folder)
     pj = folder / "params.json"
     _model(pj, _ParamsFile, _json(pj))
-    for name, check in (("residuals.npz", _residuals), ("posterior.npz", _posterior), ("texture.json", _texture)):
+    files = (("residuals.npz", _residuals), ("posterior.npz", _posterior), ("texture.json", _texture), ("rho_d.tif", _tif))
+    for name, check in files:
         if (folder / name).exists() or (folder / name).is_symlink():
             check(folder / name)
     for rep in sorted(folder.glob("**/report.json")):

@@ -411,6 +411,7 @@ def simulate_cmd(
     from ..capture import CAPTURE_FILE, RuleError, check_ward_params
     from ..ward import WardParams
 
+    _check_name_length(out_dir)
     if not material:
         try:  # the same rules as capture.toml and the Python API, named as the options are typed
             check_ward_params(rho_d, rho_s, alpha_x, alpha_y)
@@ -686,6 +687,8 @@ def report_cmd(fits_dir: Path, out_path: Path) -> None:
     """Write a batch report of the fits in FITS_DIR (the --out folder of wardjax fit): an executed notebook."""
     from ..report import write_report
 
+    _check_name_length(fits_dir)
+    _check_out_file(out_path)
     try:
         write_report(fits_dir, out_path)
     except (ValueError, OSError) as exc:

@@ -26,18 +26,26 @@ def write_texture_image(path, image) -> Path:
     raise ValueError(f"{path}: unknown image type {path.suffix!r}, expected .tif, .tiff or .png")
 
 
-def _declared(path: Path, suffix: str) -> tuple[tuple[int, ...], np.dtype] | None:
-    """The shape and dtype the file's header declares, before its data are read (``None``: unknown)."""
+def _declared(path: Path, suffix: str) -> tuple[tuple[int, ...], np.dtype]:
+    """The shape and dtype the file's header declares, before its data are read (``ValueError`` if unreadable)."""
     if suffix == ".npy":
         return npy_header(path)
+    import logging
+
     import tifffile
 
+    log = logging.getLogger("tifffile")
+    level = log.level
+    log.setLevel(logging.CRITICAL)  # its warnings about a corrupt file become the one line below
     try:
         with tifffile.TiffFile(path) as tif:
             series = tif.series[0]
             return tuple(int(k) for k in series.shape), np.dtype(series.dtype)
-    except Exception:  # the reader below says why the file cannot be read
-        return None
+    except Exception as e:  # a corrupt header: tifffile raises many kinds, or finds no image
+        reason = shorten(one_line((str(e).strip().splitlines() or [type(e).__name__])[0]), 120)
+        raise ValueError(f"{path}: not a readable TIFF ({reason or 'no image in it'})") from None
+    finally:
+        log.setLevel(level)
 
 
 def read_rho_d(path) -> np.ndarray:
@@ -53,16 +61,14 @@ def read_rho_d(path) -> np.ndarray:
     suffix = path.suffix.lower()
     if suffix not in (".tif", ".tiff", ".npy"):
         raise ValueError(f"{path}: unknown ρd file type {path.suffix!r}, expected .tif, .tiff or .npy (linear ρd)")
-    declared = _declared(path, suffix)
-    if declared is not None:
-        shape, dtype = declared
-        try:
-            check_count(str(path), math.prod(shape[:2]), "pixels", "pixels")
-            check_memory(str(path), shape, max(dtype.itemsize, 8), copies=2)
-        except RuleError as e:
-            raise ValueError(str(e)) from None
-        if dtype.kind == "c":  # refused before it is read: no ComplexWarning on the way
-            check_rho_d_map(str(path), np.empty(0, dtype))
+    shape, dtype = _declared(path, suffix)
+    try:
+        check_count(str(path), math.prod(shape[:2]), "pixels", "pixels")
+        check_memory(str(path), shape, max(dtype.itemsize, 8), copies=2)
+    except RuleError as e:
+        raise ValueError(str(e)) from None
+    if dtype.kind == "c":  # refused before it is read: no ComplexWarning on the way
+        check_rho_d_map(str(path), np.empty(0, dtype))
     try:
         if suffix == ".npy":
             a = np.load(path, allow_pickle=False)

@@ -9,12 +9,15 @@ from pathlib import Path
 import equinox as eqx
 import numpy as np
 
-from .._files import atomic_path, write_json_atomic
+from .._files import atomic_path, file_problem, write_json_atomic
 from ..capture import one_line
 from ._pyramid import (
     ORIENTATIONS,
 )
 from ._steerable import band_names
+
+# A texture description is a few hundred KiB (quantile tables of up to 4097 entries per subband).
+_MAX_MODEL_BYTES = 64 << 20
 
 TEXTURE_FORMAT = "wardjax.texture"
 TEXTURE_FORMAT_VERSION = 1
@@ -239,13 +242,15 @@ class TextureModel(eqx.Module):
     def load(cls, path) -> TextureModel:
         """Read a model written by :meth:`save` (``.json`` or ``.npz``), checking format, version and shapes."""
         path = Path(path)
-        if path.is_dir():
-            raise ValueError(f"{path}: is a folder, expected a texture file (.json or .npz)")
-        if not path.is_file():
+        if (problem := file_problem(path)) == "no such file":
             raise ValueError(f"{path}: no such texture file")
+        if problem is not None:  # a FIFO or a device would be read without end
+            raise ValueError(f"{path}: {problem}; expected a texture file (.json or .npz)")
         suffix = path.suffix.lower()
         if suffix not in (".json", ".npz"):
             raise ValueError(f"{path}: unknown texture file type {path.suffix!r}, expected .json or .npz")
+        if path.stat().st_size > _MAX_MODEL_BYTES:
+            raise ValueError(f"{path}: {path.stat().st_size:,} bytes, more than a texture description holds")
         try:
             data = path.read_bytes()
         except OSError as e:
