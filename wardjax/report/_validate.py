@@ -252,7 +252,12 @@ def validate_fit_folder(folder: Path) -> None:
     folder = Path(folder)
     pj = folder / "params.json"
     _model(pj, _ParamsFile, _json(pj))
-    files = (("residuals.npz", _residuals), ("posterior.npz", _posterior), ("texture.json", _texture), ("rho_d.tif", _tif))
+    files = (
+        ("residuals.npz", _residuals),
+        ("posterior.npz", _posterior),
+        ("texture.json", _texture),
+        ("rho_d.tif", _tif),
+    )
     for name, check in files:
         if (folder / name).exists() or (folder / name).is_symlink():
             check(folder / name)
