@@ -617,3 +617,45 @@ def test_a_full_disk_is_refused_before_any_work(good, tmp_path, monkeypatch):
     monkeypatch.setattr(wardjax._files.shutil, "disk_usage", lambda p: usage(10 << 30, 10 << 30, 4096))
     out = tmp_path / "out"
     _refused(["fit", str(good), "--out", str(out), "--quiet"], str(out), contains="the disk is full", unwritten=[out])
+
+
+def test_a_colour_correction_that_failed_is_refused():
+    """The real ColorChecker photo's correction holds out at ΔE*ab ≈ 3–5 and passes; the same photo read
+    in reversed patch order, or a uniform grey photo, fits its own patches yet holds out far worse
+    (ΔE*ab 40 and more): refused by the rule, naming what to check."""
+    import tomllib
+
+    from wardjax.capture._rules import MAX_HELD_OUT_DELTA_E, check_camera_correction
+    from wardjax.smartphone import (
+        colorchecker_held_out_delta_E,
+        colorchecker_patch_regions,
+        colorchecker_reference_Lab,
+        colorchecker_rho_d,
+    )
+
+    data = Path(__file__).parent / "data" / "colorchecker"
+    img = iio.imread(data / "plantcv_source1_img.png")
+    lay = tomllib.loads((data / "layout.toml").read_text())
+    regions = colorchecker_patch_regions(
+        tuple(lay["first_center"]), tuple(lay["pitch"]), tuple(lay["grid"]), lay["half_size"], lay["order"]
+    )
+    ref = colorchecker_reference_Lab("chromaticities")
+    usable = np.ones(24, bool)
+    usable[np.argmax(ref[:, 0])] = False  # the clipped white
+    rho = colorchecker_rho_d(img, regions, decoding="gamma2.2")
+    good = colorchecker_held_out_delta_E(rho, ref, usable=usable)
+    check_camera_correction("chart.png", good)
+    assert np.nanmedian(good) < MAX_HELD_OUT_DELTA_E / 2
+    reversed_layout = colorchecker_held_out_delta_E(rho[::-1], ref, usable=usable[::-1])
+    with pytest.raises(RuleError, match="^chart.png: the colour correction failed: held-out ΔE") as info:
+        check_camera_correction("chart.png", reversed_layout)
+    assert len(str(info.value).splitlines()) == 1
+    grey = np.full_like(img, 128)
+    try:
+        flat = colorchecker_held_out_delta_E(colorchecker_rho_d(grey, regions, decoding="gamma2.2"), ref, usable=usable)
+    except ValueError:  # the fit itself refuses a chart of one colour: refused all the same
+        return
+    with pytest.raises(RuleError, match="failed"):
+        check_camera_correction("chart.png", flat)
+    with pytest.raises(RuleError, match="cannot be estimated"):
+        check_camera_correction("chart.png", np.full(24, np.nan))

@@ -50,6 +50,7 @@ if str(HERE) not in sys.path:  # run as a script: the fixtures' helpers below
     sys.path.insert(0, str(HERE))
 
 import wardjax as wj  # noqa: E402
+from wardjax.capture import RuleError  # noqa: E402
 from wardjax.run import main  # noqa: E402
 
 HANG_S = 60  # a command that takes longer on these small inputs hangs
@@ -1288,3 +1289,31 @@ if __name__ == "__main__":  # pragma: no cover - the counts for docs/robustness.
         if "--times" in sys.argv:
             for k, v in sorted(took.items(), key=lambda kv: -kv[1])[:40]:
                 print(f"{v:6.2f} s  {k}", file=sys.stderr)
+
+
+def test_summary_lists_every_fit_in_the_folder(tmp_path):
+    """``summary.csv`` is rebuilt from every ``params.json`` in the output folder, not only this batch's."""
+    import csv
+
+    from wardjax.run._batch import BatchItem, write_summary
+
+    out = _write_fits(tmp_path / "fits")  # two finished fits from an earlier batch: scan, phone
+    doc = json.loads((out / "scan" / "params.json").read_text())
+    write_summary(out / "summary.csv", [BatchItem(tmp_path / "caps" / "new", "new", "ok", params=doc)])
+    rows = list(csv.DictReader((out / "summary.csv").open()))
+    assert [r["capture"] for r in rows] == ["new", "phone", "scan"]
+    assert all(r["status"] == "ok" and r["rho_s"] for r in rows)
+
+
+def test_ward_params_checks_only_known_values():
+    """Under jit, vmap and grad the leaves are tracers: not checked (nor forced to the host); the values are."""
+    import jax
+    import jax.numpy as jnp
+
+    def alpha(a):
+        return wj.WardParams(rho_d=jnp.full(3, 0.5), rho_s=0.04, alpha_x=a, alpha_y=a).alpha
+
+    assert float(jax.jit(alpha)(0.1)) == pytest.approx(0.1)
+    assert np.allclose(jax.vmap(jax.grad(alpha))(jnp.array([0.1, 0.2])), 1.0)
+    with pytest.raises(RuleError, match="^alpha_x: must be > 0"):
+        alpha(jnp.asarray(-0.1))

@@ -51,5 +51,5 @@ def test_metal_exact_when_possible():
     text, dist = radiance_metal(p, "gold")
     assert text == "void metal gold\n0\n0\n5 0.8 0.8 0.8 0.25 0.09\n"
     assert dist < 1e-6
-    _, far = radiance_metal(wj.WardParams(rho_d=(0.9, 0.1, 0.1), rho_s=0.5, alpha_x=0.1, alpha_y=0.1))
+    _, far = radiance_metal(wj.WardParams(rho_d=(0.45, 0.1, 0.1), rho_s=0.5, alpha_x=0.1, alpha_y=0.1))
     assert far > 0.05
