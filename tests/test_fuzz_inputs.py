@@ -861,13 +861,13 @@ NPZ_EDITS = st.lists(st.tuples(st.integers(0, 10), st.one_of(st.none(), ARRAYS))
 
 
 @given(name=st.sampled_from(["scan", "phone"]), edits=EDITS)
-@settings(QUICK, max_examples=80)
+@settings(QUICK, max_examples=40)
 def test_report_params_json_quick(fits, name, edits):
     _params_edit(fits, name, edits)
 
 
 @given(file=st.sampled_from(["residuals.npz", "posterior.npz"]), edits=NPZ_EDITS)
-@settings(QUICK, max_examples=30)
+@settings(QUICK, max_examples=20)
 def test_report_npz_quick(fits, file, edits):
     _npz_edit(fits, file, edits)
 

@@ -36,6 +36,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jax.core import Tracer
 from jaxtyping import Array, ArrayLike, Bool, Float, Int
 
 __all__ = [
@@ -181,7 +182,7 @@ class WardParams(eqx.Module):
         if not _CHECKED.get():
             return
         leaves = (self.rho_d, self.rho_s, self.alpha_x, self.alpha_y)
-        if any(isinstance(leaf, jax.core.Tracer) for leaf in leaves):
+        if any(isinstance(leaf, Tracer) for leaf in leaves):
             return
         from .capture._rules import check_ward_arrays
 

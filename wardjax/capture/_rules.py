@@ -307,8 +307,9 @@ def check_rho_d_map(name: str, a: np.ndarray) -> None:
         )
 
 
-def _first_bad(values: np.ndarray, bad: np.ndarray | np.bool_) -> str:
-    """``"k of n values, e.g. v"``: how many of ``values`` are ``bad``, and the first of them."""
+def _first_bad(values: np.ndarray | np.generic, bad: np.ndarray | np.generic) -> str:
+    """``"got v (k of n values)"``: the first of ``values`` that is ``bad``, and how many are."""
+    values, bad = np.asarray(values), np.asarray(bad)
     first = float(values[bad].reshape(-1)[0])
     if values.size == 1:
         return f"got {first:g}"

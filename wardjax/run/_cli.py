@@ -303,8 +303,8 @@ def fit_cmd(
     from ._batch import scanline_note
 
     err = Console(stderr=True, emoji=False)
-    for p in paths:
-        _check_name_length(p)
+    for path in paths:
+        _check_name_length(path)
     missing = [str(p) for p in paths if not p.exists()]
     if missing:
         _fail(f"{missing[0]}: no such capture folder")
