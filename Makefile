@@ -35,6 +35,7 @@ lint: install
 # The documentation site (MkDocs + mkdocstrings), warnings as errors, into site/.
 docs: install
 	NO_MKDOCS_2_WARNING=1 $(VENV)/bin/mkdocs build --strict -d site
+	$(PY) docs/_tools/check_site.py site
 
 # Re-execute the notebooks in place, so that they are stored with their outputs.
 notebooks: install

@@ -47,13 +47,13 @@ on 8-bit files, rounded to nearest, the response edit's rounding is shared
 by neighbouring pixels and channels). The edited frame is re-quantised by
 stochastic rounding (``--rounding stochastic``, the default; drawn from the
 case, so a rerun writes the same file): its error is white, as a camera's
-own quantisation of a noisy signal is. The run of 2026-11-26 rounded to
-nearest (``--rounding nearest``) and is kept beside it in
-``textured_bench.csv`` (seed 0 strong), ``textured_bench_weak.csv``,
-``textured_bench_seed1.csv``, ``textured_bench_seed2.csv``; the 16-bit
-run in ``textured_bench_16bit.csv`` (at 16 bits the two roundings differ
-by 4·10⁻⁶ of full scale). Unedited cases (``none``, ``anisotropy``) are
-the same under either rounding, and a resumed run keeps their rows.
+own quantisation of a noisy signal is (``--rounding nearest`` rounds to
+nearest; at 16 bits the two differ by 4·10⁻⁶ of full scale). Unedited
+cases (``none``, ``anisotropy``) are the same under either rounding, and a
+resumed run keeps their rows. The stored CSV is the current default run,
+its first line the provenance (commit, machine, load, date); earlier runs
+(rounded to nearest, 16-bit files, other covariances) are in the history of
+``benchmarks/results/``.
 
 Run ``python -m benchmarks.textured_bench [--size 160 120] [--seeds 0 1 2] [--bit-depth 8|16]
 [--rounding stochastic|nearest] [--limit N] [--out CSV] [--append]`` or
@@ -220,8 +220,25 @@ def _key(case) -> tuple:
     return int(seed), str(strength), float(amp), str(tex), str(name)
 
 
-def _write(rows: list[dict], path: Path) -> None:
-    buf = io.StringIO()
+def provenance() -> str:
+    """The ``# provenance:`` line a results file starts with: commit, machine, load, date."""
+    import datetime
+    import os
+    import platform
+
+    from .bench_diagnose import _commit
+
+    load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
+    return (
+        f"# provenance: commit {_commit()}; machine {platform.system()} {platform.machine()}, "
+        f"{os.cpu_count()} CPU cores; load average {load:.1f} at the last write; "
+        f"date {datetime.date.today().isoformat()}\n"
+    )
+
+
+def _write(rows: list[dict], path: Path, header: str = "") -> None:
+    buf = io.StringIO(header)
+    buf.seek(0, io.SEEK_END)
     names = list(dict.fromkeys(k for r in rows for k in r)) if rows else list(FIELDS)  # rows of older runs: no bits
     w = csv.DictWriter(buf, fieldnames=names, restval="", lineterminator="\n")
     w.writeheader()
@@ -230,8 +247,8 @@ def _write(rows: list[dict], path: Path) -> None:
 
 
 def _read(path: Path) -> list[dict]:
-    with open(path, newline="") as fh:
-        return list(csv.DictReader(fh))
+    with open(path, newline="") as fh:  # lines starting with '#' (the provenance) are not rows
+        return list(csv.DictReader(line for line in fh if not line.startswith("#")))
 
 
 def _named_as(row: dict) -> set[str]:
@@ -305,7 +322,7 @@ def main(argv=None) -> None:
         "--rounding",
         default="stochastic",
         choices=ROUNDINGS,
-        help="how an edited lit frame is re-quantised (the stored 8-bit run of 2026-11-26: nearest)",
+        help="how an edited lit frame is re-quantised",
     )
     ap.add_argument("--limit", type=int, default=None, help="stop after this many cases")
     ap.add_argument("--out", type=Path, default=RESULTS / "textured_bench_stochastic.csv")
@@ -328,7 +345,7 @@ def main(argv=None) -> None:
             for i, (seed, strength, amp, tex, name) in enumerate(todo):
                 row = run_case(Path(tmp), seed, strength, amp, tex, name, tuple(a.size), a.bit_depth, a.rounding)
                 rows.append(row)
-                _write(rows, a.out)
+                _write(rows, a.out, provenance())
                 print(
                     f"[{i + 1}/{len(todo)}] {tex:6s} {amp:.2f} {name:10s} {strength:6s} found {row['found'] or '-'}"
                     f" amb {row['ambiguous'] or '-'} gap {row['gap_before']} → {row['gap_after']} ({row['seconds']} s)",
@@ -337,7 +354,7 @@ def main(argv=None) -> None:
     text, table = summarise(rows)
     print(text)
     if table:
-        _write(table, a.out.with_name(a.out.stem + "_confusion.csv"))
+        _write(table, a.out.with_name(a.out.stem + "_confusion.csv"), provenance())
 
 
 if __name__ == "__main__":

@@ -102,3 +102,74 @@ def test_notebooks_are_stored_executed():
         assert code and all(c.get("execution_count") for c in code), f"{path.name}: a code cell was not executed"
         assert not [o for c in code for o in c.get("outputs", []) if o.output_type == "error"], path.name
         assert any("image/png" in o.get("data", {}) for c in code for o in c.get("outputs", [])), path.name
+
+
+# --------------------------------------------------------------------------- the manual's form
+
+PAGES = sorted((ROOT / "docs").rglob("*.md"))
+# A page or the README that tells how the code came to be rather than what it does.
+HISTORY = re.compile(r"\bissues? #?[0-9]|\bsessions?\b", re.I)
+MAX_PAGE_LINES = 300
+
+
+def test_no_page_names_an_issue_or_a_session():
+    hits = [
+        f"{path.relative_to(ROOT)}:{i}: {line.strip()[:80]}"
+        for path in (*PAGES, ROOT / "README.md")
+        for i, line in enumerate(path.read_text(encoding="utf-8").splitlines(), 1)
+        if HISTORY.search(line)
+    ]
+    assert not hits, "\n".join(hits)
+
+
+def test_no_page_is_over_300_lines():
+    long = {str(p.relative_to(ROOT)): n for p in PAGES if (n := len(p.read_text(encoding="utf-8").splitlines())) > 300}
+    assert not long, long
+
+
+def test_the_history_regex_catches_what_it_should():
+    assert HISTORY.search("as issue 13 asks") and HISTORY.search("the third session") and HISTORY.search("Issues 4")
+    assert not HISTORY.search("the issue asks nothing") and not HISTORY.search("sessional")
+
+
+def _roles():
+    sys.path.insert(0, str(ROOT / "docs" / "_tools"))
+    import sphinx_roles
+
+    return sphinx_roles
+
+
+def test_docstring_roles_become_cross_references():
+    # The griffe extension mkdocs.yml loads: every Sphinx role in a docstring is rewritten, a public target as a link.
+    import griffe
+
+    roles = _roles()
+    pkg = griffe.load("wardjax", search_paths=[str(ROOT)], resolve_aliases=False)
+    before = sum(len(roles.ROLE.findall(o.docstring.value)) for o in roles._objects(pkg) if o.docstring)
+    assert before > 100  # the docstrings are numpydoc with Sphinx roles: the extension has work to do
+    roles.convert_package(pkg)
+    left = [o.path for o in roles._objects(pkg) if o.docstring and roles.RAW_ROLE.search(o.docstring.value)]
+    assert not left, left
+    fit_capture = pkg["run._fit_capture.fit_capture"]
+    # ":class:`~wardjax.Capture`" in its docstring: a link to the public name, shown by its last component
+    assert (
+        '<autoref identifier="wardjax.Capture" optional><code>Capture</code></autoref>' in fit_capture.docstring.value
+    )
+    scanline = pkg["run._fit_capture"]
+    # ":func:`wardjax.reconstruct_brdf`" (a re-export) and ":meth:`~wardjax.ScanlineFit.combined`" resolve too
+    assert 'identifier="wardjax.reconstruct_brdf"' in scanline.docstring.value
+    assert "<code>combined()</code>" in scanline.docstring.value
+
+
+def test_built_site_shows_no_raw_role(site):
+    roles = _roles()
+    bad = {
+        str(p.relative_to(site)): len(roles.RAW_ROLE.findall(p.read_text(encoding="utf-8")))
+        for p in site.rglob("*.html")
+        if roles.RAW_ROLE.search(p.read_text(encoding="utf-8"))
+    }
+    assert not bad, bad
+    fit_page = (site / "api" / "fit" / "index.html").read_text(encoding="utf-8")
+    assert re.search(r'<a class="autorefs autorefs-internal"[^>]*href="[^"]*#wardjax\.ward\.WardParams"', fit_page) or (
+        re.search(r'<a class="autorefs autorefs-internal"[^>]*WardParams', fit_page)
+    )
