@@ -178,7 +178,7 @@ def _pm(value: float | None, err: float | None) -> str:
 )
 @click.option("--seed", type=click.IntRange(min=0), default=0, show_default=True)
 def demo(out_dir: Path, seed: int) -> None:
-    """Simulate the desk and marble captures of the paper's Table 1, fit them, compare with the truth."""
+    """Simulate the desk and marble captures of the paper's Table 1, fit them with the smartphone example, compare."""
     from ._demo import run_capture_demo
 
     run_capture_demo(out_dir, seed=seed, console=console)
@@ -288,7 +288,7 @@ def fit_cmd(
     """
     import contextlib
 
-    from ._batch import scanline_note
+    from ._batch import color_note, scanline_note
 
     err = Console(stderr=True, emoji=False)
     missing = [str(p) for p in paths if not p.exists()]
@@ -332,6 +332,8 @@ def fit_cmd(
         for it in items:  # limits that were hit are said, not left in params.json alone
             if note := scanline_note(it.params):
                 console.print(f"note: {it.name}: {note}", highlight=False, soft_wrap=True)
+            if note := color_note(it.params):
+                console.print(f"colour: {it.name}: {note}", highlight=False, soft_wrap=True)
     if any(it.status == "error" for it in items):
         sys.exit(2)
 
