@@ -44,7 +44,7 @@ with ``capture.toml``::
 
 With ``[color_correction]`` ρd is read through the chart's correction and its
 σ carries the correction's leave-one-out colour error
-(:func:`wardjax.smartphone.chart_correction`); a patch under the surface's
+(``wardjax.smartphone.chart_correction``); a patch under the surface's
 region is left out of the fit.
 
 The method: ρd from the photo (linearise, Bradford D65 → E, robust region

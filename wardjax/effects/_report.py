@@ -401,7 +401,7 @@ class DiscoveryReport:
 
     # ---------------------------------------------------------------- figures
     def plot_gap(self):
-        """The gap after each step (dashed: the noise level, 1): :func:`gap_figure`."""
+        """The gap after each step (dashed: the noise level, 1): ``gap_figure``."""
         return gap_figure(self.gap, ["baseline"] + [f"+ {s}" for s in self.found])
 
     def plot_step(self, i: int):

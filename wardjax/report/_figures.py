@@ -6,6 +6,7 @@ import json
 
 import numpy as np
 from matplotlib.figure import Figure
+from matplotlib.ticker import NullFormatter
 
 from ..effects import gap_figure as effects_gap_figure
 from ..texture import TextureModel, read_rho_d, synthesize_texture
@@ -215,12 +216,12 @@ def batch_figure(results: list[CaptureResult], flags: dict[str, set[str]]) -> Fi
     x = np.arange(len(results))
     for k, key in enumerate(PARAMETERS):
         ax = fig.add_subplot(n, 2, 2 * k + 1)
-        v = np.array([r.value(key) for r in results])
+        v, err = _value_and_bar(results, key)
         rel = np.array([_relative_sigma(r, key) for r in results])
         bad = np.array([key in flags[r.name] for r in results])
-        ax.errorbar(x[~bad], v[~bad, 0], yerr=v[~bad, 1], fmt="o", color="C0", ms=4, capsize=3)
+        ax.errorbar(x[~bad], v[~bad], yerr=err[:, ~bad], fmt="o", color="C0", ms=4, capsize=3)
         if bad.any():
-            ax.errorbar(x[bad], v[bad, 0], yerr=v[bad, 1], fmt="o", color="C3", ms=5, capsize=3, label="outlier")
+            ax.errorbar(x[bad], v[bad], yerr=err[:, bad], fmt="o", color="C3", ms=5, capsize=3, label="outlier")
             ax.legend(fontsize=7, frameon=False, loc="upper right")
         ax.set_ylabel(_LABELS[key], fontsize=8)
         last = k == n - 1
@@ -231,15 +232,30 @@ def batch_figure(results: list[CaptureResult], flags: dict[str, set[str]]) -> Fi
             ax2.annotate(f"{rv:.2g} %", (xi, rv), textcoords="offset points", xytext=(0, 2), ha="center", fontsize=7)
         ax2.set_yscale("log")
         ax2.set_ylim(np.nanmin(rel) / 3, np.nanmax(rel) * 5)
+        ax2.yaxis.set_minor_formatter(NullFormatter())
         ax2.set_ylabel("1σ / value (%)", fontsize=8)
         ax2.set_xticks(x, [r.name for r in results] if last else [], fontsize=7, rotation=30)
     fig.suptitle(
-        "parameters across the batch (dimensionless): value ± 1σ (left; bars hidden by the marker where σ is "
-        "small) and relative 1σ (right)",
+        "parameters across the batch (dimensionless): value ± 1σ, a posterior α its median and 68 % interval "
+        "(left; bars hidden by the marker where σ is small), and relative 1σ (right)",
         fontsize=8.5,
     )
     fig.tight_layout()
     return fig
+
+
+def _value_and_bar(results: list[CaptureResult], key: str) -> tuple[np.ndarray, np.ndarray]:
+    """Values ``(N,)`` and error bars ``(2, N)`` (below, above): ± 1σ, or a posterior α's 68 % interval."""
+    v, err = np.empty(len(results)), np.empty((2, len(results)))
+    for i, r in enumerate(results):
+        post = r.doc["fit"].get("posterior")
+        if post is not None and key.startswith("alpha"):
+            lo, hi = post["alpha_interval_68"]
+            v[i], err[:, i] = post["alpha_median"], (post["alpha_median"] - lo, hi - post["alpha_median"])
+        else:
+            v[i], e = r.value(key)
+            err[:, i] = e
+    return v, err
 
 
 def _relative_sigma(result: CaptureResult, key: str) -> float:

@@ -110,7 +110,8 @@ def batch_section(results: list[CaptureResult]) -> None:
     n_out = sum(bool(f) for f in flags.values())
     _display(
         _html(
-            f"<h2>Batch: {len(results)} captures, {n_out} with an outlying parameter</h2>"
+            f"<h2>Batch: {len(results)} capture{'s' if len(results) != 1 else ''}, {n_out} with an outlying "
+            "parameter</h2>"
             f"<table class='batch'><tr>{head}</tr>{''.join(rows)}</table>" + _UNITS_NOTE
         )
     )
@@ -174,7 +175,7 @@ def _correlation_table(result: CaptureResult) -> str:
             )
         return ""
     c = np.asarray(cov["matrix"], float)
-    names = [_SHARED.get(n, n) for n in cov["parameters"]]
+    names = [str(_SHARED.get(n, n)) for n in cov["parameters"]]
     d = np.sqrt(np.clip(np.diag(c), 0, None))
     corr = c / np.where(np.outer(d, d) > 0, np.outer(d, d), np.nan)
     head = "".join(f"<th>{html.escape(n)}</th>" for n in names)
@@ -283,6 +284,12 @@ def _scanline_image(result: CaptureResult):
     return Image(filename=str(plot))
 
 
+def _rho_s_source(doc: dict) -> str:
+    """Where a ρs that was not fitted comes from (the smartphone method's Fresnel assumption)."""
+    src = doc["fit"].get("rho_s_source")
+    return f" — assumed, not measured: {html.escape(src)}; σ a quarter of that range" if src else ""
+
+
 def capture_section(result: CaptureResult) -> None:
     """One capture: parameters with units and intervals, error models, correlations, then the figures.
 
@@ -295,7 +302,7 @@ def capture_section(result: CaptureResult) -> None:
     rgb = ", ".join(f"{v:.4f} ± {s:.2g}" for v, s in zip(p["rho_d"], e["rho_d"]))
     items = (
         f"<li>ρd (R, G, B; linear, sRGB primaries, white E; dimensionless) = {rgb}</li>"
-        f"<li>ρs (dimensionless) = {_pm(*result.value('rho_s'))}</li>" + _alpha_intervals(result)
+        f"<li>ρs (dimensionless) = {_pm(*result.value('rho_s'))}{_rho_s_source(doc)}</li>" + _alpha_intervals(result)
     )
     _display(
         _html(

@@ -5,14 +5,14 @@ by a fit on all the others and compared with its published colour, giving a
 held-out CIELAB residual ``r_k = Lab(ρd'_k) − Lab_ref,k`` (D50) per patch —
 the leave-one-out ΔE*ab is ``|r_k|``. Those residuals are the correction's
 error on a colour it never saw, so they are also the error on the surface's
-corrected ρd: :func:`rho_d_color_sigma` moves the surface's colour by each
+corrected ρd: ``rho_d_color_sigma`` moves the surface's colour by each
 residual in CIELAB and takes the spread of ρd that results,
 
-.. math:: \\sigma_c = \\sqrt{\\tfrac1K \\sum_k \\big(\\rho_c(\\mathrm{Lab}_s + r_k) - \\rho_{c,s}\\big)^2},
+    σ_c = √( (1/K) Σ_k (ρ_c(Lab_s + r_k) − ρ_c,s)² ),
 
 a non-parametric propagation (no Jacobian: CIELAB is non-linear in ρd, most
-of all in a dark channel). Its ΔE*ab equivalent is the RMS held-out ΔE of the
-chart by construction; that it also predicts each patch's error is what
+of all in a dark channel). Its ΔE*ab equivalent is about the RMS held-out ΔE of the
+chart; that it also predicts each patch's error is what
 ``tests/test_chart_error.py`` checks on the real PlantCV photo (RMS of the
 error/σ ratio over 23 patches × 3 channels within [0.5, 2]).
 """
@@ -43,7 +43,7 @@ class ChartCorrection(NamedTuple):
     Attributes
     ----------
     correction
-        The correction fitted on every usable patch (:class:`CameraCorrection`).
+        The correction fitted on every usable patch (``CameraCorrection``).
     usable
         ``(24,)`` bool: patches the fit used (not clipped, black, or under the surface's region).
     rho_d_raw
@@ -126,14 +126,14 @@ def chart_correction(
         The sRGB photo ``(H, W, 3)`` holding the chart (uint8/uint16 or floats in [0, 1]).
     regions
         24 boxes ``(y0, y1, x0, x1)`` in chart order (dark skin … black), e.g. from
-        :func:`~wardjax.smartphone.colorchecker_patch_regions`.
+        ``wardjax.smartphone.colorchecker_patch_regions``.
     decoding
         The photo's decoding, as for the surface.
     surface
         The surface's region: a patch whose box overlaps it is left out of the fit (a
         surface is never corrected with its own reference).
     method, degree, terms
-        :func:`~wardjax.smartphone.fit_camera_correction`'s options.
+        the options of ``wardjax.smartphone.fit_camera_correction``.
 
     Raises
     ------

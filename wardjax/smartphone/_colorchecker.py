@@ -8,8 +8,8 @@
 - :func:`fit_camera_correction`: a chart-based camera correction: a tone exponent from the
   neutral patches, then colour-science's characterisation (``"Finlayson 2015"``
   root-polynomial by default, ``"Cheung 2004"`` polynomial) in linear RGB, white E.
-- :func:`colorchecker_held_out_delta_E`: its leave-one-out ΔE*ab per patch
-  (:func:`colorchecker_held_out_Lab`: the CIELAB residual behind it).
+- ``colorchecker_held_out_delta_E``: its leave-one-out ΔE*ab per patch
+  (``colorchecker_held_out_Lab``: the CIELAB residual behind it).
 """
 
 from __future__ import annotations
@@ -259,8 +259,8 @@ def colorchecker_held_out_delta_E(
 
     Each usable patch is corrected by a fit on all the other usable patches and compared with
     its reference; unusable patches (e.g. clipped ones, ``usable`` False) are neither fitted
-    nor scored (NaN). ``fit_options`` go to :func:`fit_camera_correction`. Shape (N,): the
-    norm of :func:`colorchecker_held_out_Lab`.
+    nor scored (NaN). ``fit_options`` go to ``fit_camera_correction``. Shape (N,): the
+    norm of ``colorchecker_held_out_Lab``.
     """
     return np.linalg.norm(colorchecker_held_out_Lab(rho_d, reference_Lab, usable=usable, **fit_options), axis=-1)
 
@@ -268,11 +268,11 @@ def colorchecker_held_out_delta_E(
 def colorchecker_held_out_Lab(
     rho_d: ArrayLike, reference_Lab: ArrayLike, *, usable: ArrayLike | None = None, **fit_options
 ) -> NDArray:
-    """Leave-one-out CIELAB residual (D50) of :func:`fit_camera_correction` per patch, shape (N, 3).
+    """Leave-one-out CIELAB residual (D50) of ``fit_camera_correction`` per patch, shape (N, 3).
 
     Row ``k``: ``Lab(correction fitted without k applied to patch k) − reference_Lab[k]``;
     NaN for patches that are not ``usable`` (neither fitted nor scored). Its norm is
-    :func:`~wardjax.smartphone.colorchecker_held_out_delta_E`.
+    ``colorchecker_held_out_delta_E``.
     """
     x = np.asarray(rho_d, dtype=np.float64)
     ref = np.asarray(reference_Lab, dtype=np.float64)

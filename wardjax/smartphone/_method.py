@@ -59,8 +59,8 @@ def fit_smartphone(
     seed
         Sampler seed.
     chart
-        A camera correction fitted on a ColorChecker (:func:`chart_correction`): ρd is
-        corrected by it, and its held-out error joins ρd's σ (:func:`rho_d_color_sigma`).
+        A camera correction fitted on a ColorChecker (``chart_correction``): ρd is
+        corrected by it, and its held-out error joins ρd's σ (``rho_d_color_sigma``).
 
     Returns
     -------
