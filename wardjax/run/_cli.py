@@ -311,12 +311,15 @@ def fit_cmd(
         from rich.table import Table
 
         t = Table(title=f"{len(items)} capture(s) → {out_dir}/summary.csv")
-        for col in ("capture", "status", "ρs", "αx", "αy", "χ²/dof"):
+        for col in ("capture", "status", "ρs", "αx", "αy", "residual variance (sr⁻², unit weights)"):
             t.add_column(col)
         for it in items:
             if it.params:
                 p, e = it.params["params"], it.params["stderr"]
                 pm = lambda k: _pm(p[k], e[k])
+                if post := it.params["fit"].get("posterior"):  # a skewed posterior: median [68 % interval]
+                    lo, hi = post["alpha_interval_68"]
+                    pm = lambda k: f"{p[k]:.4f} [{lo:.4f}, {hi:.4f}]" if k.startswith("alpha") else _pm(p[k], e[k])
                 rc = it.params["fit"].get("reduced_chi2")  # none for the smartphone method
                 t.add_row(
                     it.name,
