@@ -131,7 +131,7 @@ def residual_figure(result: CaptureResult) -> Figure | None:
     finite = meas[np.isfinite(meas)]
     hi = float(np.percentile(finite, 99.5)) if finite.size else 1.0
     im = ax.imshow(np.ma.masked_invalid(meas), cmap="magma", vmin=0, vmax=hi, extent=extent, aspect="equal")
-    fig.colorbar(im, ax=ax, label=r"measured $f_r$ (sr$^{-1}$, mean RGB)", fraction=0.046)
+    fig.colorbar(im, ax=ax, label=r"$f_r$ (sr$^{-1}$, mean RGB)", fraction=0.046)
     ax.set_title("measured BRDF over the probe", fontsize=8.5)
     ax.set_xlabel("image column (px)")
     ax.set_ylabel("image row (px)")
@@ -236,8 +236,8 @@ def batch_figure(results: list[CaptureResult], flags: dict[str, set[str]]) -> Fi
         ax2.set_ylabel("1σ / value (%)", fontsize=8)
         ax2.set_xticks(x, [r.name for r in results] if last else [], fontsize=7, rotation=30)
     fig.suptitle(
-        "parameters across the batch (dimensionless): value ± 1σ, a posterior α its median and 68 % interval "
-        "(left; bars hidden by the marker where σ is small), and relative 1σ (right)",
+        "parameters across the batch (dimensionless). Left: value ± 1σ (a posterior α: median and 68 % interval;\n"
+        "bars hidden by the marker where σ is small). Right: 1σ relative to the value, log scale",
         fontsize=8.5,
     )
     fig.tight_layout()
