@@ -178,6 +178,28 @@ def test_combined_isotropic_matches_the_truth_and_pools_information(iso_fit):
     assert c.reduced_chi2 == pytest.approx(1.0, abs=0.1)
 
 
+def test_combined_rho_d_sigma_follows_each_channels_noise():
+    """ρd's σ per channel: each channel's own residual variance (unit weights, noise ∝ signal, a red surface).
+
+    Checked against the scatter of the per-scanline ρd about their mean, which uses no residual variance.
+    """
+    rng = np.random.default_rng(3)
+    s = 40
+    truth = wj.WardParams(
+        rho_d=np.tile([0.6, 0.3, 0.1], (s, 1)), rho_s=np.full(s, 0.05), alpha_x=np.full(s, 0.1), alpha_y=np.full(s, 0.1)
+    )
+    data = wj.simulate_scanlines(truth, x_offsets=rng.uniform(-20, 20, s), noise_rel=0.02, seed=rng)
+    c = wj.fit_scanlines(data.f_r, data.wi, data.wo).combined()  # unit weights
+    sigma = np.asarray(c.stderr.rho_d)
+    per_scan = np.asarray(c.rho_d_scanlines)
+    scatter = per_scan.std(axis=0, ddof=1) / np.sqrt(per_scan.shape[0])
+    # R noisier than G than B (the grey lobe's share of the noise and of the shared parameters' error is equal)
+    assert sigma[0] > sigma[1] > sigma[2]
+    # at least the scanlines' own scatter, plus the shared (ρs, α) error that scatter cannot see
+    np.testing.assert_array_less(0.8 * scatter, sigma)
+    np.testing.assert_array_less(sigma, 2.0 * scatter)
+
+
 def test_fast_path_agrees_with_optimistix_reference(iso_fit):
     _, data, fast = iso_fit
     sl = slice(0, 48)

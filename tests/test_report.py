@@ -4,6 +4,7 @@ import html
 import json
 import re
 import shutil
+from pathlib import Path
 
 import imageio.v3 as iio
 import numpy as np
@@ -16,10 +17,12 @@ from wardjax.run import main, run_batch
 from wardjax.simulate import SensorNoise, simulate_capture
 from wardjax.ward import WardParams
 
+EXAMPLE = Path(__file__).parents[1] / "examples" / "smartphone" / "colorchecker-red"
+
 SCANLINE = ("glossy", "matte")
 # Every capture's section: its figures under these headings, each one embedded PNG.
 SCANLINE_FIGURES = (
-    "Errors by error model",
+    "1σ by error model",
     "Fitted vs measured scanline",
     "Residuals over the image",
     "ρd texture and a synthesised tile",
@@ -45,8 +48,20 @@ def fits(tmp_path_factory):
         p = WardParams(rho_d=(rd, rd, rd), rho_s=rs, alpha_x=a, alpha_y=a)
         simulate_capture(p, root / "captures" / name, seed=1, image_size=(96, 72), noise=SensorNoise(0.002, 0.0))
     _smartphone_capture(root / "captures" / "phone")
+    shutil.copytree(EXAMPLE, root / "captures" / "phone-chart")  # a real photo with its colour chart
     run_batch([root / "captures"], root / "fits")
     return root / "fits"
+
+
+@pytest.fixture(scope="module")
+def report_page(fits, tmp_path_factory):
+    """The HTML report of the fits, with a stand-in for what ``wardjax diagnose`` writes beside one of them.
+
+    ``report.json`` holds the gap after each step; the real diagnose run is in a slow test below.
+    """
+    (fits / "matte" / "diagnose").mkdir(exist_ok=True)
+    (fits / "matte" / "diagnose" / "report.json").write_text('{"found": ["anisotropy"], "gap": [3.9, 1.02]}')
+    return write_report(fits, tmp_path_factory.mktemp("page") / "report.html").read_text(encoding="utf-8")
 
 
 def _sections(page: str) -> dict[str, str]:
@@ -66,20 +81,15 @@ def _figures_under(section: str) -> dict[str, int]:
     return out
 
 
-def test_html_report_has_every_capture_section_and_figure_and_needs_nothing_else(fits, tmp_path):
-    # A stand-in for what `wardjax diagnose` writes (report.json: the gap after each step); the real
-    # diagnose run is in the slow test below.
-    (fits / "matte" / "diagnose").mkdir()
-    (fits / "matte" / "diagnose" / "report.json").write_text('{"found": ["anisotropy"], "gap": [3.9, 1.02]}')
-    out = write_report(fits, tmp_path / "report.html")
-    page = out.read_text(encoding="utf-8")
-    assert "Batch: 3 captures" in page
+def test_html_report_has_every_capture_section_and_figure_and_needs_nothing_else(report_page):
+    page = report_page
+    assert "Batch: 4 captures" in page
     sections = _sections(page)
-    assert sorted(sections) == ["glossy", "matte", "phone"]
+    assert sorted(sections) == ["glossy", "matte", "phone", "phone-chart"]
     for name in SCANLINE:
         figs = _figures_under(sections[name])
         assert all(figs.get(h) == 1 for h in SCANLINE_FIGURES), (name, figs)
-        assert "Parameters ± 1σ by error model" in figs  # the table: σ by texture field, sandwich, model
+        assert "Parameters ± 1σ by error model (dimensionless)" in figs  # texture field, sandwich, model
         assert "texture field (reported)" in sections[name] and "scanline sandwich" in sections[name]
         assert not any(h.startswith("α posterior") for h in figs)
     assert _figures_under(sections["matte"]).get("Missing-effect gap") == 1
@@ -92,6 +102,47 @@ def test_html_report_has_every_capture_section_and_figure_and_needs_nothing_else
     assert not re.search(r'(src|href)="https?://', page)  # opens with no server and no network
     # no cell printed an error or a warning (stderr outputs carry this mime type in the HTML)
     assert not re.search(r'<div[^>]*data-mime-type="application/vnd\.jupyter\.(stderr|error)"', page)
+
+
+def _text(fragment: str) -> str:
+    """The visible text of an HTML fragment, entities decoded, whitespace collapsed."""
+    return " ".join(html.unescape(re.sub(r"<[^>]+>", " ", fragment)).split())
+
+
+def test_every_number_is_labelled_alpha_is_an_interval_and_correlations_are_shown(report_page, fits):
+    page = report_page
+    batch = _text(page[page.index("Batch:") : page.index('id="capture-')])
+    # the fit-quality column names what it is: unweighted fits give an RMS residual in sr⁻¹, not a "χ²/dof"
+    assert "fit residual" in batch and "χ²/dof" not in batch and "sr⁻¹" in batch
+    assert "dimensionless" in batch and "median [68 % interval]" in batch
+    sections = {k: _text(v) for k, v in _sections(page).items()}
+    for name in SCANLINE:
+        sec = sections[name]
+        doc = json.loads((fits / name / "params.json").read_text())
+        cov = np.asarray(doc["fit"]["covariance"]["matrix"])
+        r = cov[0, 1] / np.sqrt(cov[0, 0] * cov[1, 1])
+        assert "Correlations of the shared parameters" in sec and f"ρs–α {r:+.2f}" in sec, name
+        assert re.search(r"α = [0-9.]+ \(dimensionless[^)]*\); 68 % \[[0-9.]+, [0-9.]+\], 95 % \[", sec), name
+        assert "Which σ to believe" in sec and "(reported)" in sec
+        assert "ρd (R, G, B; linear, sRGB primaries, white E; dimensionless)" in sec
+    for name in ("phone", "phone-chart"):
+        sec = sections[name]
+        assert re.search(r"posterior median\); 68 % \[[0-9.]+, [0-9.]+\], 95 % \[[0-9.]+, [0-9.]+\]", sec)
+        assert "no symmetric ± is quoted" in sec and "ρs–α: none" in sec
+    assert "the camera's colour error" in sections["phone"]  # no chart: said, not hidden
+    assert re.search(r"held out of its own fit, mean [0-9.]+, RMS [0-9.]+", sections["phone-chart"])
+    assert "log_f" not in page
+
+
+def test_gap_figure_shows_a_difference_of_0_002():
+    """``gap.png`` and the report's gap chart: 1.003 against 1.001 apart on the axis, not two bars from 0."""
+    from wardjax.effects import gap_figure
+
+    ax = gap_figure([1.003, 1.001], ["baseline", "+ anisotropy"]).axes[0]
+    lo, hi = ax.get_ylim()
+    assert lo > 0.99 and hi < 1.01  # the 0.002 step spans a visible share of the axis
+    assert (1.003 - 1.001) / (hi - lo) > 0.2
+    assert "dimensionless" in ax.get_ylabel()
 
 
 def test_residuals_file_holds_the_fit_over_the_image(fits):

@@ -1,4 +1,4 @@
-"""Access to the plain-file data shipped in ``calibration/``."""
+"""Access to the plain-file data shipped in ``calibration/`` and ``examples/``."""
 
 from __future__ import annotations
 
@@ -8,19 +8,29 @@ from pathlib import Path
 
 from .ward import WardParams
 
-__all__ = ["calibration_path", "table1_materials"]
+__all__ = ["calibration_path", "example_path", "table1_materials"]
+
+
+def _shipped(folder: str, name: str) -> Path:
+    """Path of ``folder/name`` (installed as package data or beside the source)."""
+    here = Path(__file__).resolve().parent
+    for root in (here / folder, here.parent / folder):
+        if (root / name).exists():
+            return root / name
+    pkg = resources.files("wardjax") / folder / name
+    if pkg.is_file() or pkg.is_dir():
+        return Path(str(pkg))
+    raise FileNotFoundError(f"{folder} file {name!r} not found beside the wardjax package")
 
 
 def calibration_path(name: str) -> Path:
     """Path of a file in ``calibration/`` (installed as package data or beside the source)."""
-    here = Path(__file__).resolve().parent
-    for root in (here / "calibration", here.parent / "calibration"):
-        if (root / name).exists():
-            return root / name
-    pkg = resources.files("wardjax") / "calibration" / name
-    if pkg.is_file():
-        return Path(str(pkg))
-    raise FileNotFoundError(f"calibration file {name!r} not found beside the wardjax package")
+    return _shipped("calibration", name)
+
+
+def example_path(name: str) -> Path:
+    """Path of a file or folder in ``examples/`` (e.g. ``"smartphone/colorchecker-red"``)."""
+    return _shipped("examples", name)
 
 
 def table1_materials() -> dict[str, WardParams]:

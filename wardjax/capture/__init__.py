@@ -17,6 +17,7 @@ from ._setup import load_display as load_display
 from ._setup import load_viewing as load_viewing
 from ._smartphone import SmartphoneCapture as SmartphoneCapture
 from ._smartphone import SmartphoneCaptureFile as SmartphoneCaptureFile
+from ._smartphone import grid_boxes as grid_boxes
 from ._rules import MAX_CLIPPED_FRACTION as MAX_CLIPPED_FRACTION
 from ._rules import RuleError as RuleError
 from ._rules import check_focal_px as check_focal_px
@@ -46,6 +47,7 @@ __all__ = [
     "load_viewing",
     "SmartphoneCapture",
     "SmartphoneCaptureFile",
+    "grid_boxes",
     "MAX_CLIPPED_FRACTION",
     "RuleError",
     "check_focal_px",

@@ -32,6 +32,21 @@ with ``capture.toml``::
     [fit]                            # optional
     seed = 0                         # sampler seed
 
+    [color_correction]               # optional: a ColorChecker 24 in the photo corrects the camera
+    first_center = [166.0, 169.5]    # (y, x) pixel centre of the grid's top-left patch
+    pitch = [21.2, 20.8]             # (dy, dx) between patch centres, pixels
+    grid = [6, 4]                    # rows, columns as the chart appears in the photo
+    half_size = 5                    # each patch box is (2·half_size + 1)² pixels
+    order = [18, 12, 6, 0, ...]      # chart index (0 dark skin … 23 black) of each grid cell, row-major
+    method = "Finlayson 2015"        # or "Cheung 2004", "Vandermonde"
+    degree = 2                       # root-polynomial / Vandermonde degree
+    terms = 3                        # Cheung 2004 terms
+
+With ``[color_correction]`` ρd is read through the chart's correction and its
+σ carries the correction's leave-one-out colour error
+(``wardjax.smartphone.chart_correction``); a patch under the surface's
+region is left out of the fit.
+
 The method: ρd from the photo (linearise, Bradford D65 → E, robust region
 mean), ρs from Fresnel, α from the threshold PPBs through the calibrated
 PPB → α model with an emcee posterior (:func:`wardjax.fit_smartphone`).
@@ -54,7 +69,13 @@ from ._errors import CAPTURE_FILE, CaptureError, pydantic_error
 from ._rules import LIMITS, RuleError, check_photo_region
 from ._setup import load_display, load_viewing
 
-__all__ = ["SmartphoneCapture", "SmartphoneCaptureFile", "load_smartphone_capture", "parse_smartphone_file"]
+__all__ = [
+    "SmartphoneCapture",
+    "SmartphoneCaptureFile",
+    "grid_boxes",
+    "load_smartphone_capture",
+    "parse_smartphone_file",
+]
 
 
 class _Section(BaseModel):
@@ -105,6 +126,37 @@ class SmartphoneFitSection(_Section):
     seed: Annotated[int, Strict()] = 0
 
 
+class ColorCorrectionSection(_Section):
+    first_center: tuple[_Float, _Float]
+    pitch: tuple[_Float, _Float]
+    grid: tuple[Annotated[int, Field(ge=1, strict=True)], Annotated[int, Field(ge=1, strict=True)]]
+    half_size: Annotated[int, Field(ge=0, strict=True)]
+    order: list[Annotated[int, Field(ge=0, le=23, strict=True)]] = Field(min_length=24, max_length=24)
+    method: Literal["Finlayson 2015", "Cheung 2004", "Vandermonde"] = "Finlayson 2015"
+    degree: Annotated[int, Field(ge=1, le=4, strict=True)] = 2
+    terms: Annotated[int, Field(ge=3, le=22, strict=True)] = 3
+
+    def regions(self) -> list[tuple[int, int, int, int]]:
+        """The 24 patch boxes ``(y0, y1, x0, x1)`` in chart order."""
+        return grid_boxes(self.first_center, self.pitch, self.grid, self.half_size, self.order)
+
+
+def grid_boxes(first_center, pitch, grid, half_size: int, order) -> list[tuple[int, int, int, int]]:
+    """Boxes ``(yc − h, yc + h + 1, xc − h, xc + h + 1)`` around a regular grid of centres, in ``order``.
+
+    Cell ``(r, c)`` of the ``grid`` (row-major in the image) is centred at
+    ``first_center + (r·dy, c·dx)`` and is box number ``order[r·cols + c]``.
+    """
+    cols = grid[1]
+    boxes: list = [None] * len(order)
+    for cell, idx in enumerate(order):
+        r, c = divmod(cell, cols)
+        yc = int(round(first_center[0] + r * pitch[0]))
+        xc = int(round(first_center[1] + c * pitch[1]))
+        boxes[idx] = (yc - half_size, yc + half_size + 1, xc - half_size, xc + half_size + 1)
+    return boxes
+
+
 class SmartphoneCaptureFile(_Section):
     """The whole ``capture.toml`` of a ``method = "smartphone"`` capture."""
 
@@ -115,6 +167,7 @@ class SmartphoneCaptureFile(_Section):
     setup: SetupSection = SetupSection()
     specular: SpecularSection = SpecularSection()
     fit: SmartphoneFitSection = SmartphoneFitSection()
+    color_correction: ColorCorrectionSection | None = None
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -142,6 +195,13 @@ def parse_smartphone_file(raw: dict, file: str) -> SmartphoneCaptureFile:
     if y1 <= y0 or x1 <= x0:
         raise CaptureError(
             file, "photo.region", f"[y0, y1, x0, x1] must have y1 > y0 and x1 > x0 (got {list(cfg.photo.region)})"
+        )
+    cc = cfg.color_correction
+    if cc is not None and (sorted(cc.order) != list(range(24)) or cc.grid[0] * cc.grid[1] != 24):
+        raise CaptureError(
+            file,
+            "color_correction.order",
+            f"a ColorChecker 24: grid {list(cc.grid)} must hold 24 cells and order each chart index 0–23 once",
         )
     lo, hi = cfg.specular.n_range
     if not lo <= cfg.specular.n <= hi:
@@ -213,5 +273,13 @@ def load_smartphone_capture(folder: Path, cfg: SmartphoneCaptureFile) -> Smartph
         check_photo_region(cfg.photo.file, photo[y0:y1, x0:x1], float(np.iinfo(photo.dtype).max))
     except RuleError as e:
         raise CaptureError(e.field, "photo.region", e.message) from None
+    if cfg.color_correction is not None:
+        for k, (b0, b1, a0, a1) in enumerate(cfg.color_correction.regions()):
+            if b0 < 0 or a0 < 0 or b1 > h or a1 > w:
+                raise CaptureError(
+                    CAPTURE_FILE,
+                    "color_correction",
+                    f"chart patch {k} box {[b0, b1, a0, a1]} reaches outside the {w}×{h} photo {cfg.photo.file}",
+                )
     checksums = {CAPTURE_FILE: sha256(folder / CAPTURE_FILE), cfg.photo.file: sha256(path)}
     return SmartphoneCapture(folder, cfg.name or folder.resolve().name, cfg, photo, checksums)

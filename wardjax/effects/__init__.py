@@ -28,6 +28,8 @@ from ._report import Candidate as Candidate
 from ._report import DiscoveryReport as DiscoveryReport
 from ._report import Step as Step
 from ._report import VariogramRead as VariogramRead
+from ._report import gap_figure as gap_figure
+from ._labels import covariate_label as covariate_label
 
 __all__ = [
     "discover",
@@ -50,4 +52,6 @@ __all__ = [
     "DiscoveryReport",
     "Step",
     "VariogramRead",
+    "gap_figure",
+    "covariate_label",
 ]

@@ -73,6 +73,7 @@ from scipy.special import ndtr  # the normal tail: scipy.stats's own kernel, ~1 
 from ._effect import Effect, Param
 from ._evidence import _NOISE_Z, _dominant_first, _gap_p, _lr_p, _within_noise
 from ._inputs import _check_inputs, _split_library
+from ._labels import covariate_value
 from ._recheck import VariogramRecheck
 from ._report import Candidate, DiscoveryReport, FitState, Step
 from ._solve import _cov_full, _fit_batch, _Layout, _residual_view
@@ -481,7 +482,7 @@ def _unexplained_structure(search: _Search, cur: _View, partial: list[Candidate]
         if p < structure_p / n_cov:
             unexplained.append(
                 f"unexplained discrepancy against {name} (binned χ² = {chi2:.1f} on {dof} bins, p = {p:.1e}; "
-                f"largest near {name} = {structure[name]['worst_bin']:.3g})"
+                f"largest near {covariate_value(name, structure[name]['worst_bin'])})"
             )
     if p_gap < structure_p:
         unexplained.insert(

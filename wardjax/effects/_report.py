@@ -19,6 +19,7 @@ from typing import NamedTuple
 import numpy as np
 
 from .._files import write_bytes_atomic
+from ._labels import covariate_label
 from ._structure import _binned_test
 
 __all__ = ["Candidate", "DiscoveryReport", "FitState", "Step", "VariogramRead"]
@@ -367,7 +368,8 @@ class DiscoveryReport:
                     "lower bounds, below half the winner's ΔBIC, so the fit was not continued."
                 )
             if s.effect in figures:
-                L.append(f"\n![residuals against {s.plot['covariate'] if s.plot else ''}]({figures[s.effect]})\n")
+                what = covariate_label(s.plot["covariate"]) if s.plot else ""
+                L.append(f"\n![residuals against {what}]({figures[s.effect]})\n")
         if self.ambiguous:
             L.append("\n## Not told apart\n")
             L.extend(
@@ -399,20 +401,8 @@ class DiscoveryReport:
 
     # ---------------------------------------------------------------- figures
     def plot_gap(self):
-        """Bar chart of the gap after each step (dashed: the noise level, 1)."""
-        from matplotlib.figure import Figure
-
-        fig = Figure(figsize=(4.5, 3.0), layout="constrained")
-        ax = fig.add_subplot()
-        labels = ["baseline"] + [f"+ {s}" for s in self.found]
-        ax.bar(range(len(self.gap)), self.gap, color=["0.6"] + ["C0"] * len(self.found))
-        ax.axhline(1.0, ls="--", color="k", lw=1, label="noise level")
-        ax.set_xticks(range(len(self.gap)), labels, rotation=20, ha="right")
-        ax.set_ylabel("gap (χ²/dof)")
-        if max(self.gap) / max(min(self.gap), 1e-9) > 20:
-            ax.set_yscale("log")
-        ax.legend(frameon=False)
-        return fig
+        """The gap after each step (dashed: the noise level, 1): ``gap_figure``."""
+        return gap_figure(self.gap, ["baseline"] + [f"+ {s}" for s in self.found])
 
     def plot_step(self, i: int):
         """Residuals against the telling covariate before and after step ``i`` (0-based)."""
@@ -432,7 +422,7 @@ class DiscoveryReport:
             _, _, p, xc, mean, sem = _binned_test(r, x)
             ax.errorbar(xc, mean, yerr=sem, fmt="o-", ms=3, color="C3", label="binned mean")
             ax.axhline(0, color="k", lw=0.8)
-            ax.set_xlabel(s.plot["covariate"])
+            ax.set_xlabel(covariate_label(s.plot["covariate"]))
             ax.set_title(f"{title}; p = {p:.1e}", fontsize=9)
         lim = np.nanpercentile(np.abs(np.asarray(s.plot["r_before"], float)), 99) if len(s.plot["r_before"]) else 1
         axs[0].set_ylim(-1.1 * lim - 1, 1.1 * lim + 1)
@@ -516,3 +506,36 @@ class DiscoveryReport:
         paths["json"] = out / "report.json"
         paths["md"] = out / "report.md"
         return paths
+
+
+def gap_figure(gap, labels, title: str | None = None):
+    """The gap after each step as points on an axis zoomed to the values and the noise level (1).
+
+    A bar from 0 would hide 1.003 against 1.001; each point carries its value, and the
+    axis switches to log when the values span more than a factor 20.
+    """
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(4.5, 3.0), layout="constrained")
+    ax = fig.add_subplot()
+    gap = np.asarray(gap, float)
+    x = np.arange(len(gap))
+    ax.plot(x, gap, "o-", color="C0", ms=6)
+    for xi, g in zip(x, gap):
+        ax.annotate(f"{g:.4g}", (xi, g), textcoords="offset points", xytext=(0, 7), ha="center", fontsize=8)
+    ax.axhline(1.0, ls="--", color="k", lw=1, label="noise level (1)")
+    ax.set_xticks(x, list(labels)[: len(gap)], rotation=20, ha="right")
+    ax.set_xlim(-0.5, len(gap) - 0.5)
+    ax.set_ylabel("gap: reduced χ² (dimensionless)")
+    finite = gap[np.isfinite(gap)]
+    if finite.size and finite.max() / max(finite.min(), 1e-9) > 20:
+        ax.set_yscale("log")
+    elif finite.size:
+        lo, hi = min(finite.min(), 1.0), max(finite.max(), 1.0)
+        pad = 0.25 * (hi - lo) if hi > lo else 0.001
+        ax.set_ylim(lo - pad, hi + pad)
+        ax.ticklabel_format(axis="y", useOffset=False)
+    if title:
+        ax.set_title(title, fontsize=9)
+    ax.legend(frameon=False, fontsize=8)
+    return fig

@@ -211,6 +211,7 @@ def write_smartphone_outputs(
     rho_s_source: str,
     inputs: dict,
     created: str,
+    color_correction: dict | None = None,
 ) -> dict:
     """Write a smartphone capture's ``material.rad``, ``posterior.npz`` and ``params.json`` (last) into ``out_dir``."""
     out = Path(out_dir)
@@ -233,6 +234,7 @@ def write_smartphone_outputs(
             files={"radiance": "material.rad", "posterior": "posterior.npz"},
             inputs=inputs,
             created=created,
+            color_correction=color_correction,
         )
     )
     write_json_atomic(out / "params.json", doc)

@@ -131,8 +131,12 @@ def smartphone_document(
     files: dict,
     inputs: dict,
     created: str,
+    color_correction: dict | None = None,
 ) -> dict:
     """``params.json`` of a smartphone capture: α's posterior under ``fit.posterior``.
+
+    ``color_correction`` (the chart's ΔE*ab and ρd's σ split into region and colour
+    error) goes under ``fit.color_correction`` when the capture asked for one.
 
     Radiance's ``plastic`` takes the estimates as they are: the smartphone α
     is a lobe width from a visual model, not a least-squares fit in one
@@ -163,6 +167,7 @@ def smartphone_document(
                 "effective_samples": float(post.n_steps * post.n_walkers / max(dict(post.tau).values())),
             },
             "rho_s_source": rho_s_source,
+            **({"color_correction": color_correction} if color_correction is not None else {}),
         },
         radiance={
             "normalization": "ward1992",

@@ -220,8 +220,12 @@ def combined(res: ScanlineFit, model: str, *, errors: str, max_steps: int, rtol:
     rho_d = rho_d_s.mean(axis=0)
     # σ of the mean ρd: noise in each scanline's mean, plus (ρs, α) uncertainty
     # through ∂ρd/∂(ρs, α); the two are uncorrelated (projected residual ⟂ means).
-    wsum = np.sum(np.broadcast_to(np.asarray(args.w), args.f.shape), axis=1)[:n_use]  # (S, 3)
-    noise_var = (np.pi / n_use) ** 2 * np.sum(scale / np.where(wsum > 0, wsum, np.inf), axis=0)
+    # Each channel's own residual variance: pooled over R, G, B (with the lobe grey) every channel's σ was the same.
+    wfull_p = np.broadcast_to(np.asarray(args.w), args.f.shape)
+    wsum = np.sum(wfull_p, axis=1)[:n_use]  # (S, 3)
+    dof_c = np.maximum(np.sum(wfull_p > 0, axis=(0, 1)) - n_use - (1 + k) / 3, 1)  # (3,): ρd per channel, θ shared
+    scale_c = np.sum(r.reshape(args.f.shape) ** 2, axis=(0, 1)) / dof_c
+    noise_var = (np.pi / n_use) ** 2 * np.sum(scale_c / np.where(wsum > 0, wsum, np.inf), axis=0)
     grad = np.asarray(_joint_rho_d_mean_grad(jnp.asarray(y), args, iso, jnp.asarray(n_use))) / nat[None, :]
     rho_d_var = noise_var + np.einsum("ip,pq,iq->i", grad, cov, grad)
 

@@ -6,7 +6,9 @@ import json
 
 import numpy as np
 from matplotlib.figure import Figure
+from matplotlib.ticker import NullFormatter
 
+from ..effects import gap_figure as effects_gap_figure
 from ..texture import TextureModel, read_rho_d, synthesize_texture
 from ._collect import PARAMETERS, CaptureResult, load_chains
 
@@ -41,7 +43,7 @@ def errors_figure(result: CaptureResult) -> Figure | None:
         ax.plot([lo68, hi68], [0, 0], color="C0", lw=6, label="68 % interval")
         ax.plot([post["alpha_median"]], [0], "o", color="C3", label="median")
         ax.set_yticks([])
-        ax.set_xlabel(r"$\alpha$ (posterior)")
+        ax.set_xlabel(r"$\alpha$ (posterior; dimensionless)")
         ax.legend(fontsize=8, loc="upper right", frameon=False)
         ax.set_title(f"{result.name}: α posterior", fontsize=9)
         fig.tight_layout()
@@ -56,8 +58,8 @@ def errors_figure(result: CaptureResult) -> Figure | None:
         ax.bar(x + (k - 1) * width, errors[key], width, label=label, color=f"C{k}")
     ax.set_xticks(x, [r"$\alpha$" if n == "alpha" else _LABELS.get(n, str(n)) for n in names])
     ax.set_yscale("log")
-    ax.set_ylabel("1-σ")
-    ax.set_title(f"{result.name}: errors of the shared parameters by error model", fontsize=9)
+    ax.set_ylabel("1σ (dimensionless, log scale)")
+    ax.set_title(f"{result.name}: 1σ of the shared parameters by error model", fontsize=9)
     ax.legend(fontsize=7.5, frameon=False, loc="upper left", bbox_to_anchor=(1.0, 1.0))
     fig.tight_layout()
     return fig
@@ -79,7 +81,7 @@ def texture_figure(result: CaptureResult, tile: int = 128, seed: int = 0) -> Fig
     finite = grey[np.isfinite(grey)]
     lo, hi = np.percentile(finite, [1, 99]) if finite.size else (0.0, 1.0)
     im = ax.imshow(np.ma.masked_invalid(grey), cmap="gray", vmin=lo, vmax=hi)
-    fig.colorbar(im, ax=ax, label=r"$\rho_d$ (mean RGB)", fraction=0.046)
+    fig.colorbar(im, ax=ax, label=r"$\rho_d$ (mean RGB, dimensionless)", fraction=0.046)
     ax.set_title("measured ρd over the probe (white: unusable)", fontsize=8.5)
     ax.set_xlabel("x (px, from the probe's first column)")
     ax.set_ylabel("y (px)")
@@ -88,7 +90,7 @@ def texture_figure(result: CaptureResult, tile: int = 128, seed: int = 0) -> Fig
         ax2 = fig.add_subplot(1, 2, 2)
         g2 = np.mean(np.asarray(synth), axis=-1) if np.ndim(synth) == 3 else np.asarray(synth)
         im2 = ax2.imshow(g2, cmap="gray", vmin=lo, vmax=hi)
-        fig.colorbar(im2, ax=ax2, label=r"$\rho_d$ (mean RGB)", fraction=0.046)
+        fig.colorbar(im2, ax=ax2, label=r"$\rho_d$ (mean RGB, dimensionless)", fraction=0.046)
         ax2.set_title(f"synthesised {tile}×{tile} tile (texture.json)", fontsize=8.5)
         ax2.set_xlabel("x (px)")
         ax2.set_ylabel("y (px)")
@@ -102,19 +104,11 @@ def gap_figure(result: CaptureResult) -> Figure | None:
     if not found:
         return None
     rep = json.loads(found[0].read_text(encoding="utf-8"))
-    gaps, names = rep.get("gap"), ["baseline", *rep.get("found", [])]
+    gaps = rep.get("gap")
     if not gaps:
         return None
-    fig = Figure(figsize=(5.0, 2.8), dpi=100)
-    ax = fig.add_subplot(1, 1, 1)
-    ax.plot(range(len(gaps)), gaps, "o-", color="C0")
-    ax.axhline(1.0, color="0.5", lw=0.8, ls="--", label="noise level")
-    ax.set_xticks(range(len(gaps)), names[: len(gaps)], rotation=20, fontsize=8)
-    ax.set_ylabel("gap (reduced χ²)")
-    ax.set_title(f"{result.name}: missing-effect discovery", fontsize=9)
-    ax.legend(fontsize=8, frameon=False)
-    fig.tight_layout()
-    return fig
+    names = ["baseline", *(f"+ {n}" for n in rep.get("found", []))]
+    return effects_gap_figure(gaps, names, title=f"{result.name}: missing-effect discovery")
 
 
 def residual_figure(result: CaptureResult) -> Figure | None:
@@ -132,12 +126,12 @@ def residual_figure(result: CaptureResult) -> Figure | None:
     res = np.mean(f_r - model, axis=-1)  # NaN where any channel was not fitted
     rows, cols = meas.shape
     extent = (c0 - 0.5, c0 + b * cols - 0.5, r0 + b * rows - 0.5, r0 - 0.5)  # image pixels
-    fig = Figure(figsize=(8.6, 3.4), dpi=100)
+    fig = Figure(figsize=(9.6, 3.4), dpi=100)
     ax = fig.add_subplot(1, 2, 1)
     finite = meas[np.isfinite(meas)]
     hi = float(np.percentile(finite, 99.5)) if finite.size else 1.0
     im = ax.imshow(np.ma.masked_invalid(meas), cmap="magma", vmin=0, vmax=hi, extent=extent, aspect="equal")
-    fig.colorbar(im, ax=ax, label=r"measured $f_r$ (sr$^{-1}$, mean RGB)", fraction=0.046)
+    fig.colorbar(im, ax=ax, label=r"$f_r$ (sr$^{-1}$, mean RGB)", fraction=0.046)
     ax.set_title("measured BRDF over the probe", fontsize=8.5)
     ax.set_xlabel("image column (px)")
     ax.set_ylabel("image row (px)")
@@ -210,19 +204,65 @@ def trace_figure(result: CaptureResult, walkers: int = 8) -> Figure | None:
 
 
 def batch_figure(results: list[CaptureResult], flags: dict[str, set[str]]) -> Figure:
-    """Each parameter ± 1σ across the captures of the batch; flagged outliers in red."""
-    fig = Figure(figsize=(7.0, 1.0 + 1.1 * len(PARAMETERS)), dpi=100)
+    """Each parameter across the batch (left) and its relative 1σ (right, log scale); outliers in red.
+
+    Between captures the values differ far more than their σ, so bars of ± 1σ
+    on the values' axis are thinner than the markers; the right column shows
+    each σ at its own scale, as a percentage of the value (smartphone α: half
+    the 68 % interval's width).
+    """
+    n = len(PARAMETERS)
+    fig = Figure(figsize=(8.4, 1.0 + 1.25 * n), dpi=100)
     x = np.arange(len(results))
     for k, key in enumerate(PARAMETERS):
-        ax = fig.add_subplot(len(PARAMETERS), 1, k + 1)
-        v = np.array([r.value(key) for r in results])
+        ax = fig.add_subplot(n, 2, 2 * k + 1)
+        v, err = _value_and_bar(results, key)
+        rel = np.array([_relative_sigma(r, key) for r in results])
         bad = np.array([key in flags[r.name] for r in results])
-        ax.errorbar(x[~bad], v[~bad, 0], yerr=v[~bad, 1], fmt="o", color="C0", ms=4, capsize=2)
+        ax.errorbar(x[~bad], v[~bad], yerr=err[:, ~bad], fmt="o", color="C0", ms=4, capsize=3)
         if bad.any():
-            ax.errorbar(x[bad], v[bad, 0], yerr=v[bad, 1], fmt="o", color="C3", ms=5, capsize=2, label="outlier")
+            ax.errorbar(x[bad], v[bad], yerr=err[:, bad], fmt="o", color="C3", ms=5, capsize=3, label="outlier")
             ax.legend(fontsize=7, frameon=False, loc="upper right")
         ax.set_ylabel(_LABELS[key], fontsize=8)
-        ax.set_xticks(x, [r.name for r in results] if k == len(PARAMETERS) - 1 else [], fontsize=7, rotation=30)
-    fig.suptitle("parameters ± 1σ across the batch", fontsize=9)
+        last = k == n - 1
+        ax.set_xticks(x, [r.name for r in results] if last else [], fontsize=7, rotation=30)
+        ax2 = fig.add_subplot(n, 2, 2 * k + 2)
+        ax2.bar(x, rel, color=np.where(bad, "C3", "C0"))
+        for xi, rv in zip(x, rel):
+            ax2.annotate(f"{rv:.2g} %", (xi, rv), textcoords="offset points", xytext=(0, 2), ha="center", fontsize=7)
+        ax2.set_yscale("log")
+        ax2.set_ylim(np.nanmin(rel) / 3, np.nanmax(rel) * 5)
+        ax2.yaxis.set_minor_formatter(NullFormatter())
+        ax2.set_ylabel("1σ / value (%)", fontsize=8)
+        ax2.set_xticks(x, [r.name for r in results] if last else [], fontsize=7, rotation=30)
+    fig.suptitle(
+        "parameters across the batch (dimensionless). Left: value ± 1σ (a posterior α: median and 68 % interval;\n"
+        "bars hidden by the marker where σ is small). Right: 1σ relative to the value, log scale",
+        fontsize=8.5,
+    )
     fig.tight_layout()
     return fig
+
+
+def _value_and_bar(results: list[CaptureResult], key: str) -> tuple[np.ndarray, np.ndarray]:
+    """Values ``(N,)`` and error bars ``(2, N)`` (below, above): ± 1σ, or a posterior α's 68 % interval."""
+    v, err = np.empty(len(results)), np.empty((2, len(results)))
+    for i, r in enumerate(results):
+        post = r.doc["fit"].get("posterior")
+        if post is not None and key.startswith("alpha"):
+            lo, hi = post["alpha_interval_68"]
+            v[i], err[:, i] = post["alpha_median"], (post["alpha_median"] - lo, hi - post["alpha_median"])
+        else:
+            v[i], e = r.value(key)
+            err[:, i] = e
+    return v, err
+
+
+def _relative_sigma(result: CaptureResult, key: str) -> float:
+    """1σ as a percentage of the value; a posterior α: half its 68 % interval over the median."""
+    post = result.doc["fit"].get("posterior")
+    if post is not None and key.startswith("alpha"):
+        lo, hi = post["alpha_interval_68"]
+        return 100.0 * 0.5 * (hi - lo) / post["alpha_median"]
+    v, e = result.value(key)
+    return 100.0 * e / abs(v) if v else float("nan")

@@ -5,6 +5,7 @@ from __future__ import annotations
 import html
 import io
 
+import numpy as np
 from matplotlib.figure import Figure
 
 from ._collect import PARAMETERS, CaptureResult, flag_outliers, load_chains, split_rhat
@@ -18,7 +19,7 @@ from ._figures import (
     trace_figure,
 )
 
-__all__ = ["batch_section", "capture_section"]
+__all__ = ["batch_section", "capture_section", "fit_quality"]
 
 
 def _display(*objs) -> None:
@@ -47,32 +48,71 @@ def _pm(value: float, err: float) -> str:
     return f"{value:.4f} ± {e}"
 
 
+def _alpha_cell(r: CaptureResult, key: str) -> str:
+    """αx/αy in the batch table: ``median [68 %]`` from a posterior, else ``value ± σ``."""
+    post = r.doc["fit"].get("posterior")
+    if post is None:
+        return _pm(*r.value(key))
+    lo, hi = post["alpha_interval_68"]
+    return f"{post['alpha_median']:.4f} [{lo:.4f}, {hi:.4f}]"
+
+
+def fit_quality(doc: dict) -> tuple[str, str]:
+    """``(value, what it is)`` of a capture's fit quality, named by what was computed.
+
+    A weighted fit (``fit.weighted``) reports χ²/dof; a unit-weight least-squares fit's
+    ``reduced_chi2`` is the residual variance in sr⁻² (not a χ²), so the table gives the
+    RMS residual in sr⁻¹ and as a share of the mean f_r; the smartphone method has no
+    least-squares fit.
+    """
+    fit = doc["fit"]
+    if fit.get("weighted") and fit.get("reduced_chi2") is not None:
+        return f"{fit['reduced_chi2']:.3g}", "weighted χ²/dof"
+    res = fit.get("diagnostics", {}).get("residuals")
+    if res:
+        return f"{res['rms']:.2g} sr⁻¹ ({res['relative_rms']:.1%})", "RMS residual, unit weights"
+    if fit.get("reduced_chi2") is not None:
+        rc = fit["reduced_chi2"]
+        return f"{rc**0.5:.2g} sr⁻¹", "RMS residual, unit weights"
+    return "–", "no least-squares fit (posterior)"
+
+
+_UNITS_NOTE = (
+    "<p class='units'>ρd: diffuse reflectance, mean over R, G, B (linear sRGB primaries, white E); ρs: specular "
+    "reflectance; αx, αy: Ward lobe widths (RMS surface slope, ≈ lobe width in radians). All four are "
+    "dimensionless. Scanline captures: value ± 1σ (the error model each capture section names). Smartphone "
+    "captures: α as posterior median [68 % interval] (the posterior is skewed). Fit residual: measured − fitted "
+    "BRDF, in sr⁻¹ and as a share of the mean measured f_r; the fits are unweighted, so no χ² is quoted. "
+    "Red bold: more than 3.5 robust σ from the batch median (with ≥ 4 captures).</p>"
+)
+
+
 def batch_section(results: list[CaptureResult]) -> None:
     """The table across captures (outliers flagged: > 3.5 robust σ from the batch median) and its plot."""
     flags = flag_outliers(results)
-    head = "".join(
-        f"<th>{html.escape(k)}</th>" for k in ("capture", "method", "model", "status", *PARAMETERS, "χ²/dof")
-    )
+    names = ("capture", "method", "model", "status", "ρd (mean RGB)", "ρs", "αx", "αy", "fit residual")
+    head = "".join(f"<th>{html.escape(k)}</th>" for k in names)
     rows = []
     for r in results:
         cells = [r.name, r.doc["method"], r.doc["model"], r.doc["fit"].get("status", "")]
         vals = []
         for key in PARAMETERS:
-            v, e = r.value(key)
+            text = _alpha_cell(r, key) if key.startswith("alpha") else _pm(*r.value(key))
             style = ' style="color:#c00;font-weight:bold" title="outlier"' if key in flags[r.name] else ""
-            vals.append(f"<td{style}>{_pm(v, e)}</td>")
-        chi = r.doc["fit"].get("reduced_chi2")
+            vals.append(f"<td{style}>{html.escape(text)}</td>")
+        q, what = fit_quality(r.doc)
         rows.append(
             "<tr>"
             + "".join(f"<td>{html.escape(str(c))}</td>" for c in cells)
             + "".join(vals)
-            + f"<td>{'' if chi is None else f'{chi:.3g}'}</td></tr>"
+            + f"<td title='{html.escape(what)}'>{html.escape(q)}</td></tr>"
         )
     n_out = sum(bool(f) for f in flags.values())
     _display(
         _html(
-            f"<h2>Batch: {len(results)} captures, {n_out} with an outlying parameter</h2>"
-            f"<table class='batch'><tr>{head}</tr>{''.join(rows)}</table>"
+            f"<h2>Batch: {len(results)} capture{'s' if len(results) != 1 else ''}, {n_out} with an outlying "
+            "parameter</h2>"
+            f"<table class='batch'><tr>{head}</tr>{''.join(rows)}</table>" + _UNITS_NOTE
         )
     )
     _display(_png(batch_figure(results, flags)))
@@ -80,9 +120,20 @@ def batch_section(results: list[CaptureResult]) -> None:
 
 _SHARED = {"rho_s": "ρs", "alpha": "α", "alpha_x": "αx", "alpha_y": "αy"}
 _MODEL_COLUMNS = (
-    ("texture_field", "texture field (reported)"),
+    ("texture_field", "texture field"),
     ("scanline_sandwich", "scanline sandwich"),
     ("model", "Gauss–Newton model"),
+)
+_ERROR_MODELS = (
+    "<p class='error-models'><b>Which σ to believe.</b> <i>Texture field</i> (reported): the Gauss–Newton "
+    "covariance plus the aliasing of the ρd texture into ρs and α — a texture that varies along a scanline "
+    "mimics part of a lobe, and no residual-based error sees that; right for a real, textured surface, where it "
+    "is the honest one. <i>Scanline sandwich</i>: clustered by scanline, robust to noise correlated within a "
+    "scanline and to a misfit that differs between scanlines; right for a uniform surface whose noise is not "
+    "white or whose model is slightly off (needs ≥ 10 scanlines). <i>Gauss–Newton model</i>: the Jacobian "
+    "scaled by the residual variance; right only when the residuals are independent noise of one variance (a "
+    "uniform surface the model fits) — on a textured surface it is too small. Where they disagree by more than "
+    "2×, the data hold structure the smallest one ignores.</p>"
 )
 
 
@@ -94,17 +145,105 @@ def _errors_table(result: CaptureResult) -> str:
     if not errors or not names:
         return ""
     p = result.doc["params"]
-    head = "".join(f"<th>{html.escape(label)}</th>" for _, label in _MODEL_COLUMNS)
+    reported = errors.get("reported", "texture_field")
+    head = "".join(
+        f"<th>{html.escape(label + (' (reported)' if key == reported else ''))}</th>" for key, label in _MODEL_COLUMNS
+    )
     rows = []
     for i, n in enumerate(names):
         v = float(p["alpha_x"] if n == "alpha" else p[n])
         cells = "".join(f"<td>{_pm(v, float(errors[key][i]))}</td>" for key, _ in _MODEL_COLUMNS)
         rows.append(f"<tr><td>{html.escape(_SHARED.get(n, n))}</td>{cells}</tr>")
+    sig = np.array([[float(errors[key][i]) for key, _ in _MODEL_COLUMNS] for i in range(len(names))])
+    spread = float(np.max(sig.max(axis=1) / sig.min(axis=1)))
     return (
-        "<h3>Parameters ± 1σ by error model</h3>"
+        "<h3>Parameters ± 1σ by error model (dimensionless)</h3>"
         f"<table class='errors'><tr><th>parameter</th>{head}</tr>{''.join(rows)}</table>"
-        "<p>The texture field is what the fit reports: it adds the ρd texture's aliasing into ρs and α, "
-        "which no residual-based error sees.</p>"
+        f"<p>The three error models differ by up to {spread:.1f}× on this capture.</p>" + _ERROR_MODELS
+    )
+
+
+def _correlation_table(result: CaptureResult) -> str:
+    """Correlations of the shared parameters, from ``fit.covariance`` (the reported error model's)."""
+    cov = result.doc["fit"].get("covariance")
+    if not cov or not cov.get("matrix"):
+        if "posterior" in result.doc["fit"]:
+            return (
+                "<h3>Correlations</h3><p>ρs–α: none — ρs is not fitted here but taken from Fresnel at the assumed "
+                "refractive index, independent of the thresholds that give α. α's correlation with the observer "
+                "noise and the median threshold is in the corner plot below.</p>"
+            )
+        return ""
+    c = np.asarray(cov["matrix"], float)
+    names = [str(_SHARED.get(n, n)) for n in cov["parameters"]]
+    d = np.sqrt(np.clip(np.diag(c), 0, None))
+    corr = c / np.where(np.outer(d, d) > 0, np.outer(d, d), np.nan)
+    head = "".join(f"<th>{html.escape(n)}</th>" for n in names)
+    body = "".join(
+        f"<tr><td>{html.escape(n)}</td>" + "".join(f"<td>{corr[i, j]:+.2f}</td>" for j in range(len(names))) + "</tr>"
+        for i, n in enumerate(names)
+    )
+    pairs = ", ".join(
+        f"{names[i]}–{names[j]} {corr[i, j]:+.2f}" for i in range(len(names)) for j in range(i + 1, len(names))
+    )
+    return (
+        "<h3>Correlations of the shared parameters</h3>"
+        f"<table class='correlation'><tr><th></th>{head}</tr>{body}</table>"
+        f"<p>Correlation coefficients (−1 to 1) of the reported covariance: {html.escape(pairs)}. "
+        "A σ alone understates how far two correlated parameters can move together.</p>"
+    )
+
+
+def _alpha_intervals(result: CaptureResult) -> str:
+    """α as median with 68/95 % intervals: the posterior's, or the log-normal of a fit made in log α."""
+    doc = result.doc
+    post = doc["fit"].get("posterior")
+    if post is not None:
+        lo68, hi68 = post["alpha_interval_68"]
+        lo95, hi95 = post["alpha_interval_95"]
+        m = post["alpha_median"]
+        skew = (hi95 - m) / (m - lo95) if m > lo95 else float("nan")
+        return (
+            f"<li>α (αx = αy, dimensionless) = {m:.4f} (posterior median); 68 % [{lo68:.4f}, {hi68:.4f}], "
+            f"95 % [{lo95:.4f}, {hi95:.4f}]; mean {post['alpha_mean']:.4f}. Skewed: the upper 95 % arm is "
+            f"{skew:.2f}× the lower, so no symmetric ± is quoted.</li>"
+        )
+    out = []
+    iso = doc["model"] == "isotropic"
+    for key in ("alpha_x",) if iso else ("alpha_x", "alpha_y"):
+        v, e = result.value(key)
+        if not (v > 0 and e >= 0):
+            continue
+        f68, f95 = np.exp(e / v), np.exp(1.96 * e / v)  # the fit is in log α: σ(ln α) = σ/α
+        name, unit = ("α", "dimensionless; αx = αy") if iso else (_SHARED[key], "dimensionless")
+        out.append(
+            f"<li>{name} = {v:.4f} ({unit}); 68 % [{v / f68:.4f}, {v * f68:.4f}], 95 % "
+            f"[{v / f95:.4f}, {v * f95:.4f}] (log-normal: the fit is made in ln α; σ/α = {e / v:.1%})</li>"
+        )
+    return "".join(out)
+
+
+def _color_block(result: CaptureResult) -> str:
+    """A smartphone capture's ρd: where its σ comes from, with the chart correction's ΔE*ab."""
+    doc = result.doc
+    if doc["method"] != "smartphone":
+        return ""
+    cc = doc["fit"].get("color_correction")
+    if cc is None:
+        return (
+            "<p>ρd's σ is the region's standard error only: no colour chart was given "
+            "(<code>[color_correction]</code> in capture.toml), so the camera's colour error — ΔE*ab 5–20 for "
+            "phones — is unknown and not in it.</p>"
+        )
+    loo, raw = cc["delta_E_held_out"], cc["delta_E_uncorrected"]
+    reg = ", ".join(f"{v:.1e}" for v in cc["rho_d_sigma_region"])
+    col = ", ".join(f"{v:.2g}" for v in cc["rho_d_sigma_color"])
+    return (
+        f"<p>ρd is corrected by the ColorChecker in the photo ({html.escape(cc['method'])}, "
+        f"{cc['patches_used']} patches, tone exponent {cc['tone_exponent']:.2f}). ΔE*ab (CIE 1976, D50): "
+        f"uncorrected mean {raw['mean']:.1f}; corrected, each patch held out of its own fit, mean {loo['mean']:.1f}, "
+        f"RMS {loo['rms']:.1f}, max {loo['max']:.1f}. ρd's σ (R, G, B) = colour error ({col}) ⊕ region standard "
+        f"error ({reg}): the held-out residuals moved onto this colour.</p>"
     )
 
 
@@ -145,8 +284,14 @@ def _scanline_image(result: CaptureResult):
     return Image(filename=str(plot))
 
 
+def _rho_s_source(doc: dict) -> str:
+    """Where a ρs that was not fitted comes from (the smartphone method's Fresnel assumption)."""
+    src = doc["fit"].get("rho_s_source")
+    return f" — assumed, not measured: {html.escape(src)}; σ a quarter of that range" if src else ""
+
+
 def capture_section(result: CaptureResult) -> None:
-    """One capture: parameters ± σ (by error model), the α posterior, scanline, residuals, texture, gap chart.
+    """One capture: parameters with units and intervals, error models, correlations, then the figures.
 
     Every figure comes under its own ``<h3>`` heading; a figure whose input the
     capture's folder lacks (no posterior for a scanline capture, no
@@ -154,20 +299,26 @@ def capture_section(result: CaptureResult) -> None:
     """
     doc = result.doc
     p, e = doc["params"], doc["stderr"]
-    items = "".join(f"<li>{html.escape(k)} = {_pm(*result.value(k))}</li>" for k in PARAMETERS)
-    rgb = ", ".join(f"{v:.4f}" for v in p["rho_d"])
-    rgb_e = ", ".join(f"{v:.2g}" for v in e["rho_d"])
+    rgb = ", ".join(f"{v:.4f} ± {s:.2g}" for v, s in zip(p["rho_d"], e["rho_d"]))
+    items = (
+        f"<li>ρd (R, G, B; linear, sRGB primaries, white E; dimensionless) = {rgb}</li>"
+        f"<li>ρs (dimensionless) = {_pm(*result.value('rho_s'))}{_rho_s_source(doc)}</li>" + _alpha_intervals(result)
+    )
     _display(
         _html(
             f"<h2 id='capture-{html.escape(result.name)}'>Capture {html.escape(result.name)}</h2>"
             f"<p>{html.escape(doc['method'])}, {html.escape(doc['model'])}, normalisation "
             f"{html.escape(doc['normalization'])}; fit status {html.escape(str(doc['fit'].get('status')))}</p>"
-            f"<ul>{items}<li>ρd RGB = ({rgb}) ± ({rgb_e})</li></ul>" + _errors_table(result) + _chain_table(result)
+            f"<ul>{items}</ul>"
+            + _color_block(result)
+            + _errors_table(result)
+            + _correlation_table(result)
+            + _chain_table(result)
         )
     )
     post = "posterior" in doc["fit"]
     figures = (
-        ("α posterior: 68 and 95 % intervals" if post else "Errors by error model", lambda: errors_figure(result)),
+        ("α posterior: 68 and 95 % intervals" if post else "1σ by error model", lambda: errors_figure(result)),
         ("α posterior: corner plot", lambda: corner_figure(result)),
         ("α posterior: chains", lambda: trace_figure(result)),
         ("Fitted vs measured scanline", lambda: _scanline_image(result)),

@@ -219,6 +219,23 @@ def scanline_note(doc: dict | None) -> str | None:
     )
 
 
+def color_note(doc: dict | None) -> str | None:
+    """One line on a smartphone fit's colour: the chart correction's ΔE*ab, or that none was asked for."""
+    if not doc or doc.get("method") != "smartphone":
+        return None
+    cc = doc.get("fit", {}).get("color_correction")
+    if cc is None:
+        return (
+            "no [color_correction] in capture.toml: ρd's σ is the region's standard error only; "
+            "the camera's colour error (ΔE*ab often 5–20) is not in it"
+        )
+    loo, raw = cc["delta_E_held_out"], cc["delta_E_uncorrected"]
+    return (
+        f"ColorChecker correction ({cc['method']}, {cc['patches_used']} patches): leave-one-out ΔE*ab (D50) "
+        f"mean {loo['mean']:.1f}, max {loo['max']:.1f} (uncorrected mean {raw['mean']:.1f}); ρd's σ includes it"
+    )
+
+
 def _num(x) -> str:
     return "" if x is None else f"{float(x):.6g}"
 

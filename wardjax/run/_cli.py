@@ -190,7 +190,7 @@ def _pm(value: float | None, err: float | None) -> str:
 )
 @click.option("--seed", type=click.IntRange(min=0), default=0, show_default=True)
 def demo(out_dir: Path, seed: int) -> None:
-    """Simulate the desk and marble captures of the paper's Table 1, fit them, compare with the truth."""
+    """Simulate the desk and marble captures of the paper's Table 1, fit them with the smartphone example, compare."""
     from ._demo import run_capture_demo
 
     run_capture_demo(out_dir, seed=seed, console=console)
@@ -300,7 +300,7 @@ def fit_cmd(
     """
     import contextlib
 
-    from ._batch import scanline_note
+    from ._batch import color_note, scanline_note
 
     err = Console(stderr=True, emoji=False)
     for path in paths:
@@ -332,12 +332,15 @@ def fit_cmd(
         from rich.table import Table
 
         t = Table(title=f"{len(items)} capture(s) → {out_dir}/summary.csv")
-        for col in ("capture", "status", "ρs", "αx", "αy", "χ²/dof"):
+        for col in ("capture", "status", "ρs", "αx", "αy", "residual variance (sr⁻², unit weights)"):
             t.add_column(col)
         for it in items:
             if it.params:
                 p, e = it.params["params"], it.params["stderr"]
                 pm = lambda k: _pm(p[k], e[k])
+                if post := it.params["fit"].get("posterior"):  # a skewed posterior: median [68 % interval]
+                    lo, hi = post["alpha_interval_68"]
+                    pm = lambda k: f"{p[k]:.4f} [{lo:.4f}, {hi:.4f}]" if k.startswith("alpha") else _pm(p[k], e[k])
                 rc = it.params["fit"].get("reduced_chi2")  # none for the smartphone method
                 t.add_row(
                     it.name,
@@ -353,6 +356,8 @@ def fit_cmd(
         for it in items:  # limits that were hit are said, not left in params.json alone
             if note := scanline_note(it.params):
                 console.print(f"note: {it.name}: {note}", highlight=False, soft_wrap=True)
+            if note := color_note(it.params):
+                console.print(f"colour: {it.name}: {note}", highlight=False, soft_wrap=True)
     if any(it.status == "error" for it in items):
         sys.exit(2)
 

@@ -8,7 +8,7 @@ import numpy as np
 
 from ..capture import CAPTURE_FILE, CaptureError, SmartphoneCapture
 from ..export import write_smartphone_outputs
-from ..smartphone import fit_smartphone
+from ..smartphone import chart_correction, fit_smartphone
 from ..ward import WardParams
 
 __all__ = ["fit_smartphone_capture"]
@@ -23,6 +23,20 @@ def fit_smartphone_capture(cap: SmartphoneCapture, out_dir: Path, *, created: st
     """
     cfg = cap.config
     t = cfg.thresholds
+    chart, cc = None, cfg.color_correction
+    if cc is not None:
+        try:
+            chart = chart_correction(
+                cap.photo,
+                cc.regions(),
+                decoding=cfg.photo.decoding,
+                surface=tuple(cfg.photo.region),
+                method=cc.method,
+                degree=cc.degree,
+                terms=cc.terms,
+            )
+        except ValueError as e:  # too few usable patches for the method's terms
+            raise CaptureError(CAPTURE_FILE, "color_correction", str(e).splitlines()[0]) from None
     try:
         params, stderr, post = fit_smartphone(
             cap.photo,
@@ -36,6 +50,7 @@ def fit_smartphone_capture(cap: SmartphoneCapture, out_dir: Path, *, created: st
             n=cfg.specular.n,
             n_range=cfg.specular.n_range,  # validated into a (lo, hi) tuple
             seed=cfg.fit.seed,
+            chart=chart,
         )
     except ValueError as e:  # thresholds out of the display's range, a region of one colour…
         raise CaptureError(CAPTURE_FILE, "thresholds", str(e).splitlines()[0]) from None
@@ -51,4 +66,14 @@ def fit_smartphone_capture(cap: SmartphoneCapture, out_dir: Path, *, created: st
         rho_s_source=f"Fresnel, n = {cfg.specular.n} (range {list(cfg.specular.n_range)})",
         inputs=cap.checksums,
         created=created,
+        color_correction=None if chart is None else _color_summary(chart, stderr),
     )
+
+
+def _color_summary(chart, stderr: dict) -> dict:
+    """``fit.color_correction``: the chart's ΔE*ab and ρd's σ split into the region's and the colour error's."""
+    return {
+        **chart.summary(),
+        "rho_d_sigma_region": [float(v) for v in stderr["rho_d_region"]],
+        "rho_d_sigma_color": [float(v) for v in stderr["rho_d_color"]],
+    }

@@ -29,6 +29,7 @@ from ._color import validate_rgb_image as validate_rgb_image
 from ._colorchecker import CameraCorrection as CameraCorrection
 from ._colorchecker import colorchecker_delta_E as colorchecker_delta_E
 from ._colorchecker import colorchecker_held_out_delta_E as colorchecker_held_out_delta_E
+from ._colorchecker import colorchecker_held_out_Lab as colorchecker_held_out_Lab
 from ._colorchecker import COLORCHECKER_NAMES as COLORCHECKER_NAMES
 from ._colorchecker import CORRECTION_METHODS as CORRECTION_METHODS
 from ._colorchecker import colorchecker_patch_regions as colorchecker_patch_regions
@@ -37,6 +38,9 @@ from ._colorchecker import colorchecker_rho_d as colorchecker_rho_d
 from ._colorchecker import fit_camera_correction as fit_camera_correction
 from ._colorchecker import simulate_colorchecker_photo as simulate_colorchecker_photo
 from ._fresnel import fresnel_reflectance as fresnel_reflectance
+from ._chart_error import ChartCorrection as ChartCorrection
+from ._chart_error import chart_correction as chart_correction
+from ._chart_error import rho_d_color_sigma as rho_d_color_sigma
 from ._fresnel import metal_ior as metal_ior
 from ._fresnel import METALS as METALS
 from ._fresnel import specular_from_fresnel as specular_from_fresnel
@@ -95,6 +99,10 @@ __all__ = [
     "CameraCorrection",
     "colorchecker_delta_E",
     "colorchecker_held_out_delta_E",
+    "colorchecker_held_out_Lab",
+    "ChartCorrection",
+    "chart_correction",
+    "rho_d_color_sigma",
     "COLORCHECKER_NAMES",
     "CORRECTION_METHODS",
     "colorchecker_patch_regions",

@@ -8,7 +8,8 @@
 - :func:`fit_camera_correction`: a chart-based camera correction: a tone exponent from the
   neutral patches, then colour-science's characterisation (``"Finlayson 2015"``
   root-polynomial by default, ``"Cheung 2004"`` polynomial) in linear RGB, white E.
-- :func:`colorchecker_held_out_delta_E`: its leave-one-out ΔE*ab per patch.
+- ``colorchecker_held_out_delta_E``: its leave-one-out ΔE*ab per patch
+  (``colorchecker_held_out_Lab``: the CIELAB residual behind it).
 """
 
 from __future__ import annotations
@@ -22,6 +23,7 @@ import imageio.v3 as iio
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from ..capture import grid_boxes
 from ._color import Lab_to_diffuse, delta_E_CIE1976, diffuse_from_srgb, diffuse_to_Lab, luminance_from_rho_d
 
 __all__ = [
@@ -30,6 +32,7 @@ __all__ = [
     "CameraCorrection",
     "colorchecker_delta_E",
     "colorchecker_held_out_delta_E",
+    "colorchecker_held_out_Lab",
     "colorchecker_patch_regions",
     "colorchecker_reference_Lab",
     "colorchecker_rho_d",
@@ -150,13 +153,7 @@ def colorchecker_patch_regions(
     rows, cols = grid
     if len(order) != rows * cols or sorted(order) != list(range(rows * cols)):
         raise ValueError(f"order must be a permutation of 0..{rows * cols - 1}; got {list(order)}")
-    boxes: list = [None] * (rows * cols)
-    for cell, idx in enumerate(order):
-        r, c = divmod(cell, cols)
-        yc = int(round(first_center[0] + r * pitch[0]))
-        xc = int(round(first_center[1] + c * pitch[1]))
-        boxes[idx] = (yc - half_size, yc + half_size + 1, xc - half_size, xc + half_size + 1)
-    return boxes
+    return grid_boxes(first_center, pitch, grid, half_size, order)
 
 
 def colorchecker_rho_d(image: ArrayLike, regions, *, decoding: str = "gamma2.2") -> NDArray:
@@ -262,19 +259,32 @@ def colorchecker_held_out_delta_E(
 
     Each usable patch is corrected by a fit on all the other usable patches and compared with
     its reference; unusable patches (e.g. clipped ones, ``usable`` False) are neither fitted
-    nor scored (NaN). ``fit_options`` go to :func:`fit_camera_correction`. Shape (N,).
+    nor scored (NaN). ``fit_options`` go to ``fit_camera_correction``. Shape (N,): the
+    norm of ``colorchecker_held_out_Lab``.
+    """
+    return np.linalg.norm(colorchecker_held_out_Lab(rho_d, reference_Lab, usable=usable, **fit_options), axis=-1)
+
+
+def colorchecker_held_out_Lab(
+    rho_d: ArrayLike, reference_Lab: ArrayLike, *, usable: ArrayLike | None = None, **fit_options
+) -> NDArray:
+    """Leave-one-out CIELAB residual (D50) of ``fit_camera_correction`` per patch, shape (N, 3).
+
+    Row ``k``: ``Lab(correction fitted without k applied to patch k) − reference_Lab[k]``;
+    NaN for patches that are not ``usable`` (neither fitted nor scored). Its norm is
+    ``colorchecker_held_out_delta_E``.
     """
     x = np.asarray(rho_d, dtype=np.float64)
     ref = np.asarray(reference_Lab, dtype=np.float64)
     ok = np.ones(x.shape[0], bool) if usable is None else np.asarray(usable, bool)
     if ok.shape != x.shape[:1]:
         raise ValueError(f"usable must have shape ({x.shape[0]},); got {ok.shape}")
-    out = np.full(x.shape[0], np.nan)
+    out = np.full(x.shape, np.nan)
     for k in np.flatnonzero(ok):
         fit = ok.copy()
         fit[k] = False
         corr = fit_camera_correction(x[fit], ref[fit], **fit_options)
-        out[k] = float(colorchecker_delta_E(corr.apply(x[k : k + 1]), ref[k : k + 1])[0])
+        out[k] = diffuse_to_Lab(corr.apply(x[k : k + 1]), "D50")[0] - ref[k]
     return out
 
 

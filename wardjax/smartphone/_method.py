@@ -12,6 +12,7 @@ from ..capture import check_photo_region, load_display, load_viewing
 from ..ward import WardParams
 from ._alpha_model import AlphaModel
 from ._alpha_posterior import _as_thresholds
+from ._chart_error import ChartCorrection, rho_d_color_sigma
 from ._color import diffuse_from_srgb
 from ._fresnel import specular_from_fresnel
 
@@ -32,6 +33,7 @@ def fit_smartphone(
     n_range: tuple[float, float] = (1.4, 1.7),
     seed: int = 0,
     model: AlphaModel | None = None,
+    chart: ChartCorrection | None = None,
     **posterior_kwargs,
 ):
     """Ward parameters of a dielectric surface by the smartphone method.
@@ -56,13 +58,19 @@ def fit_smartphone(
         Refractive index for ρs, and the plausible range whose spread is quoted as ±2σ.
     seed
         Sampler seed.
+    chart
+        A camera correction fitted on a ColorChecker (``chart_correction``): ρd is
+        corrected by it, and its held-out error joins ρd's σ (``rho_d_color_sigma``).
 
     Returns
     -------
     params : WardParams
         ρd (RGB, sRGB primaries, white E), ρs (grey), ``alpha_x = alpha_y`` = posterior median.
     stderr : dict
-        1σ: ``rho_d`` (3,) — region standard error; ``rho_s`` — a quarter of the ρs spread
+        1σ: ``rho_d`` (3,) — the region's standard error and, with ``chart``, the
+        correction's colour error in quadrature (both also apart: ``rho_d_region``,
+        ``rho_d_color``; without a chart the camera's colour error is unknown and not
+        included); ``rho_s`` — a quarter of the ρs spread
         over ``n_range`` (ρs is assumed, not measured); ``alpha_x``/``alpha_y`` — posterior SD;
         also ``alpha_interval_68`` and ``alpha_interval_95``.
     posterior : AlphaPosterior
@@ -77,6 +85,10 @@ def fit_smartphone(
     top = float(np.iinfo(photo.dtype).max) if np.issubdtype(photo.dtype, np.integer) else 1.0
     check_photo_region("photo_rgb", photo[y0:y1, x0:x1], top)  # a clipped region's ρd is 0 or 1 "± 0"
     rho_d, rho_d_se = diffuse_from_srgb(photo_rgb, region, decoding=decoding, return_stderr=True)
+    rho_d_color = np.zeros(3)
+    if chart is not None:
+        rho_d, rho_d_se = _corrected(chart, rho_d, rho_d_se)
+        rho_d_color = rho_d_color_sigma(rho_d, chart.held_out_Lab)
     rho_s = specular_from_fresnel(n)
     lo, hi = np.asarray(specular_from_fresnel(np.asarray(n_range, dtype=float)))  # an array in, an array out
     model = model or AlphaModel.from_calibration()
@@ -100,7 +112,9 @@ def fit_smartphone(
     alpha = post.median
     params = WardParams.from_estimate(rho_d=rho_d, rho_s=rho_s, alpha_x=alpha, alpha_y=alpha)
     stderr = {
-        "rho_d": rho_d_se,
+        "rho_d": np.sqrt(rho_d_se**2 + rho_d_color**2),
+        "rho_d_region": rho_d_se,
+        "rho_d_color": rho_d_color,
         "rho_s": float(abs(hi - lo) / 4.0),
         "alpha_x": post.std,
         "alpha_y": post.std,
@@ -108,3 +122,12 @@ def fit_smartphone(
         "alpha_interval_95": post.interval(0.95),
     }
     return params, stderr, post
+
+
+def _corrected(chart: ChartCorrection, rho_d, se, step: float = 1e-6):
+    """ρd through the chart's correction, its region standard error through the correction's Jacobian."""
+    rho = np.asarray(rho_d, dtype=np.float64)
+    out = chart.correction.apply(rho[None])[0]
+    h = step * np.maximum(rho, 1e-3)
+    jac = np.stack([(chart.correction.apply((rho + h[i] * np.eye(3)[i])[None])[0] - out) / h[i] for i in range(3)], 1)
+    return out, np.sqrt((jac**2) @ (np.asarray(se) ** 2))
