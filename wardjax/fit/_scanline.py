@@ -162,7 +162,9 @@ class ScanlineFit:
         check_choice("model", model, ("isotropic", "anisotropic"))
         check_choice("errors", errors, ("robust", "model"))
         with jax.enable_x64(True):
-            return combined(self, model, errors=errors, max_steps=max_steps, rtol=rtol)
+            return combined(
+                self._data, self.status, self.normalization, model, errors=errors, max_steps=max_steps, rtol=rtol
+            )
 
 
 @functools.partial(jax.jit, static_argnames=("normalization", "dtype"))
