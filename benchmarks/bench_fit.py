@@ -1,19 +1,21 @@
-"""fit_scanlines vs SciPy least_squares(method="lm") looping over scanlines; Ward vs NumPy.
+"""The engine against SciPy: ``fit_scanlines`` with its defaults vs ``least_squares(method="lm")``.
 
-The same RGB problem for both: 5 parameters per scanline (ρd RGB, ρs, α),
-256 samples, σ = 1 % of f, weights 1/σ². SciPy starts from a generic point
-(ρd 0.5, ρs 0.05, α 0.1) as typical lab scripts do, once with 2-point finite
-differences and once with an analytic Jacobian. SciPy runs on at most
-``--scipy-max`` scanlines per size (its rate does not depend on the batch);
-deviations are measured on those. "Collapsed" = α off by more than 50 %.
-wardjax's rate is the best of three runs (compile time reported apart);
-SciPy's is one long run. float32 is timed twice: on the float64 arrays (cast
-inside the kernel) and on float32 arrays, as a float32 pipeline would hold them;
-then both precisions once more on arrays already on the device (``jax.Array``).
-Above 10⁵ scanlines the batch is 10⁵ simulated scanlines repeated (simulating
-10⁶ takes minutes; each fit does the same work whatever its data).
+The scanlines are drawn by this file's own NumPy code (:func:`draw_scanlines`), not by
+:mod:`wardjax.simulate`: lamp and camera in the plane x = 0 (the image-based paper's rig),
+the scanline along y through the highlight at an offset across it, RGB, 256 samples, Ward
+(1992) isotropic with 1 % multiplicative Gaussian noise. Four regimes: broad lobes
+(α 0.03–0.3) and narrow lobes (α 0.01–0.05), each weighted (``1/σ²`` from the true noise)
+and unweighted (no weights: the default a user without a noise model gets).
 
-Run alone: ``python -m benchmarks.bench_fit [--sizes 100,1000,10000,100000]``.
+Per regime, side by side in one run: ``fit_scanlines`` with its defaults (``errors="auto"``)
+and with ``errors="gauss_newton"`` (best of three runs after compiling), SciPy LM with
+2-point finite differences and with the analytic Jacobian from a generic start (ρd 0.5,
+ρs 0.05, α 0.1) on the first ``--scipy`` scanlines, the ratios, which σ the defaults
+reported, and the robust SD of (fit − truth)/σ for α and ρs (1 is honest). Then Ward
+evaluations per second against NumPy (the exp floor of every fit).
+
+Run alone: ``python -m benchmarks.bench_fit [--n 20000] [--scipy 200]`` (about 2–3 min on
+two cores).
 """
 
 from __future__ import annotations
@@ -21,6 +23,7 @@ from __future__ import annotations
 import argparse
 import functools
 import time
+from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -31,10 +34,74 @@ import wardjax as wj
 from wardjax.simulate import x_offset_for_slope
 
 _SIMULATED = 100_000
+MAD = 1.4826
+NOISE = 0.01  # multiplicative: σ = 1 % of the true value
+REGIMES = {"broad": (0.03, 0.3), "narrow": (0.01, 0.05)}
+
+
+class Drawn(NamedTuple):
+    """Scanlines drawn by :func:`draw_scanlines`: truth ``(S,)``/``(S, 3)``, data ``(S, N, 3)``."""
+
+    rho_d: np.ndarray
+    rho_s: np.ndarray
+    alpha: np.ndarray
+    f_r: np.ndarray
+    wi: np.ndarray
+    wo: np.ndarray
+    sigma: np.ndarray
+
+
+def _unit(a):
+    return a / np.linalg.norm(a, axis=-1, keepdims=True)
+
+
+def draw_scanlines(s: int, alpha_range, *, n: int = 256, noise: float = NOISE, seed: int = 0) -> Drawn:
+    """``s`` scanlines of random Ward materials, each in its own rig, by plain NumPy.
+
+    Lamp at elevation 20–60° on the +y side and camera at 20–60° on the −y side, both at
+    x = 0 and 400–900 mm from the sample's origin; the scanline runs along y over
+    ``±(3…40)·α`` in half-vector slope (log-uniform) around the highlight, at an offset
+    across it that tilts the half vector by up to ``±1.5 α``. Values are Ward 1992,
+    ``ρd/π + ρs exp(−tan²δ/α²) / (4πα² √(cos θi cos θo))``, times ``1 + noise·ε``.
+    """
+    rng = np.random.default_rng(seed)
+    alpha = rng.uniform(*alpha_range, s)
+    rho_s = rng.uniform(0.01, 0.1, s)
+    rho_d = rng.uniform(0.05, 0.8, (s, 3))
+    el_l, el_c = np.deg2rad(rng.uniform(20, 60, (2, s)))
+    d_l, d_c = rng.uniform(400, 900, (2, s))
+    lamp = np.stack([np.zeros(s), d_l * np.cos(el_l), d_l * np.sin(el_l)], -1)
+    cam = np.stack([np.zeros(s), -d_c * np.cos(el_c), d_c * np.sin(el_c)], -1)
+    # The mirror point on y = 0's line x = 0: where the path lamp → sample → camera reflects.
+    y_m = (lamp[:, 1] * cam[:, 2] + cam[:, 1] * lamp[:, 2]) / (lamp[:, 2] + cam[:, 2])
+
+    # Half-vector slopes per mm along y and across (x) at the mirror point: tan δ ≈ |h_xy| / h_z.
+    def slopes(x, y):
+        p = np.stack([x, y, np.zeros_like(x)], -1)
+        h = _unit(lamp - p) + _unit(cam - p)
+        return h[:, 0] / h[:, 2], h[:, 1] / h[:, 2]
+
+    step = 1e-3
+    zero = np.zeros(s)
+    dy = (slopes(zero, y_m + step)[1] - slopes(zero, y_m - step)[1]) / (2 * step)
+    dx = (slopes(zero + step, y_m)[0] - slopes(zero - step, y_m)[0]) / (2 * step)
+    half = np.exp(rng.uniform(np.log(3.0), np.log(40.0), s)) * alpha / np.abs(dy)
+    x0 = rng.uniform(-1.5, 1.5, s) * alpha / np.abs(dx)
+    y = y_m[:, None] + np.linspace(-1.0, 1.0, n)[None, :] * half[:, None]
+    p = np.stack([np.broadcast_to(x0[:, None], y.shape), y, np.zeros_like(y)], -1)
+    wi, wo = _unit(lamp[:, None] - p), _unit(cam[:, None] - p)
+    h = wi + wo
+    tan2 = (h[..., 0] ** 2 + h[..., 1] ** 2) / h[..., 2] ** 2
+    a2 = alpha[:, None] ** 2
+    spec = rho_s[:, None] * np.exp(-tan2 / a2) / (4 * np.pi * a2 * np.sqrt(wi[..., 2] * wo[..., 2]))
+    f = rho_d[:, None, :] / np.pi + spec[..., None]
+    sigma = noise * f
+    return Drawn(rho_d, rho_s, alpha, f + sigma * rng.standard_normal(f.shape), wi, wo, sigma)
 
 
 @functools.lru_cache(maxsize=2)
 def make_data(n: int, seed: int = 0):
+    """``(truth, ScanlineData)`` from :func:`wardjax.simulate_scanlines` (the GPU benchmark's stage timings)."""
     if n > _SIMULATED:
         truth, d = make_data(_SIMULATED, seed)
         k = -(-n // _SIMULATED)
@@ -49,17 +116,12 @@ def make_data(n: int, seed: int = 0):
     return truth, wj.simulate_scanlines(truth, x_offsets=x0, rig=rig, seed=rng)
 
 
-def _geometry_np(wi, wo):
-    h = wi + wo
-    u = h[..., 0] ** 2 / h[..., 2] ** 2
-    v = h[..., 1] ** 2 / h[..., 2] ** 2
-    g = 1.0 / (4 * np.pi * np.sqrt(wi[..., 2] * wo[..., 2]))
-    return u + v, g
-
-
 def scipy_fit(f, wi, wo, sigma, analytic: bool):
-    t, g = _geometry_np(wi, wo)
-    inv_s = 1.0 / sigma
+    """One scanline by SciPy's LM (MINPACK) from a generic start; ``sigma=None``: unweighted."""
+    h = wi + wo
+    t = (h[:, 0] ** 2 + h[:, 1] ** 2) / h[:, 2] ** 2
+    g = 1.0 / (4 * np.pi * np.sqrt(wi[:, 2] * wo[:, 2]))
+    inv_s = np.ones_like(f) if sigma is None else 1.0 / sigma
 
     def model(p):
         e = np.exp(-t / p[4] ** 2)
@@ -70,8 +132,7 @@ def scipy_fit(f, wi, wo, sigma, analytic: bool):
 
     def jac(p):
         a = p[4]
-        e = np.exp(-t / a**2)
-        spec = g * e / a**2
+        spec = g * np.exp(-t / a**2) / a**2
         j = np.zeros((t.size, 3, 5))
         for c in range(3):
             j[:, c, c] = 1 / np.pi
@@ -96,110 +157,67 @@ def _best_of(k, fn):
     return best, out
 
 
-def bench_fits(sizes, scipy_max, dtypes=(np.float64, np.float32)):
-    rows = []
-    for n in sizes:
-        truth, d = make_data(n, seed=n)
-        w = 1.0 / d.sigma**2
-        row = {"N": n}
-        for dt in dtypes:
-            t0 = time.perf_counter()
-            wj.fit_scanlines(d.f_r[:8], d.wi[:8], d.wo[:8], weights=w[:8], dtype=dt)  # compile small bucket
-            res = wj.fit_scanlines(d.f_r, d.wi, d.wo, weights=w, dtype=dt)  # includes compile of chunk shape
-            first = time.perf_counter() - t0
-            el, res = _best_of(REPEATS, lambda dt=dt: wj.fit_scanlines(d.f_r, d.wi, d.wo, weights=w, dtype=dt))
-            key = np.dtype(dt).name
-            row[f"wj_{key}_rate"] = n / el
-            row[f"wj_{key}_compile"] = max(first - el, 0.0)
-            row[f"wj_{key}_res"] = res
-        # float32 data (as a float32 pipeline stores it): the cast is outside the timing.
-        f32 = [np.asarray(a, np.float32) for a in (d.f_r, d.wi, d.wo, w)]
-        wj.fit_scanlines(*f32[:3], weights=f32[3], dtype=np.float32)
-        el, _ = _best_of(REPEATS, lambda: wj.fit_scanlines(*f32[:3], weights=f32[3], dtype=np.float32))
-        row["wj_f32in_rate"] = n / el
-        # Data already on the device (jax.Array, as a pipeline that builds its samples there holds
-        # them): fit_scanlines fits them where they are; no host-to-device copy inside the timing.
-        for key, dt in (("dev64", np.float64), ("dev32", np.float32)):
-            with jax.enable_x64(True):
-                on_dev = jax.block_until_ready([jax.device_put(np.asarray(a, dt)) for a in (d.f_r, d.wi, d.wo, w)])
-            wj.fit_scanlines(*on_dev[:3], weights=on_dev[3], dtype=dt)
-            el, _ = _best_of(REPEATS, lambda o=on_dev, dt=dt: wj.fit_scanlines(*o[:3], weights=o[3], dtype=dt))
-            row[f"wj_{key}_rate"] = n / el
-            del on_dev
-        m = min(n, scipy_max)
-        for analytic in (False, True):
-            t0 = time.perf_counter()
-            xs = np.array([scipy_fit(d.f_r[i], d.wi[i], d.wo[i], d.sigma[i], analytic) for i in range(m)])
-            el = time.perf_counter() - t0
-            key = "sp_jac" if analytic else "sp_fd"
-            row[f"{key}_rate"] = m / el
-            row[f"{key}_x"] = xs
-        row["truth"] = truth
-        row["m"] = m
-        rows.append(row)
-    return rows
+def robust_sd(z) -> float:
+    z = np.asarray(z)
+    z = z[np.isfinite(z)]
+    return float(MAD * np.median(np.abs(z - np.median(z)))) if z.size else float("nan")
 
 
-def report(rows):
+def z_sd(res, d: Drawn) -> tuple[float, float]:
+    """Robust SD of (fit − truth)/σ over the converged fits: α, ρs."""
+    ok = res.ok
+    za = (res.params.alpha_x - d.alpha) / res.stderr.alpha_x
+    zs = (res.params.rho_s - d.rho_s) / res.stderr.rho_s
+    return robust_sd(za[ok]), robust_sd(zs[ok])
+
+
+def bench_regime(d: Drawn, weighted: bool, scipy_n: int) -> dict:
+    w = 1.0 / d.sigma**2 if weighted else None
+    out: dict = {}
+    for errors in ("gauss_newton", "auto"):
+        fit = lambda errors=errors: wj.fit_scanlines(d.f_r, d.wi, d.wo, weights=w, errors=errors)
+        fit()  # compile
+        el, res = _best_of(REPEATS, fit)
+        out[errors] = (len(d.alpha) / el, res)
+    m = min(scipy_n, len(d.alpha))
+    for analytic in (False, True):
+        sig = (lambda i: d.sigma[i]) if weighted else (lambda i: None)
+        t0 = time.perf_counter()
+        xs = np.array([scipy_fit(d.f_r[i], d.wi[i], d.wo[i], sig(i), analytic) for i in range(m)])
+        out["jac" if analytic else "fd"] = (m / (time.perf_counter() - t0), xs)
+    return out
+
+
+def report_regime(name: str, weighted: bool, d: Drawn, out: dict) -> None:
+    gn_rate, gn = out["gauss_newton"]
+    rate, res = out["auto"]
+    fd, jac = out["fd"][0], out["jac"][0]
+    kinds, counts = np.unique(res.errors[res.ok], return_counts=True)
+    used = ", ".join(f"{k} {c / max(res.ok.sum(), 1):.0%}" for k, c in zip(kinds, counts))
+    za, zs = z_sd(res, d)
+    ga, gs = z_sd(gn, d)
     print(
-        "f32: float64 data fitted in float32; f32 data: float32 arrays passed in (cast untimed); "
-        "dev64/dev32: float64/float32 data already on the device (jax.Array)."
+        f"| {name} | {'1/σ²' if weighted else 'none'} | {rate:,.0f} | {gn_rate:,.0f} | {rate / gn_rate:.2f} | "
+        f"{fd:,.0f} | {jac:,.0f} | {rate / fd:,.0f} | {rate / jac:,.0f} | {used} | "
+        f"{za:.2f} / {zs:.2f} | {ga:.2f} / {gs:.2f} | {res.ok.mean():.1%} |",
+        flush=True,
+    )
+
+
+def bench_fits(n: int, scipy_n: int) -> None:
+    print(
+        f"{n:,} scanlines per regime (RGB, 256 samples, 1 % multiplicative noise); wardjax fits/s best of "
+        f"{REPEATS} after compiling; SciPy LM on the first {scipy_n}. z-SD: robust SD of (fit − truth)/σ, α / ρs."
     )
     print(
-        f"{'N':>7} | {'wardjax f64 fits/s':>18} {'compile s':>9} | {'f32 fits/s':>10} {'f32 data':>9} | "
-        f"{'dev64':>10} {'dev32':>10} | "
-        f"{'SciPy FD':>9} {'SciPy jac':>9} | {'×FD':>6} {'×jac':>6} {'f32/f64':>7} {'f32 data/f64':>12}"
+        "| lobes | weights | default fits/s | gauss_newton fits/s | default / GN | SciPy FD | SciPy jac | "
+        "× FD | × jac | σ reported | z-SD default | z-SD GN | converged |"
     )
-    for r in rows:
-        print(
-            f"{r['N']:>7} | {r['wj_float64_rate']:>18,.0f} {r['wj_float64_compile']:>9.2f} | "
-            f"{r['wj_float32_rate']:>10,.0f} {r['wj_f32in_rate']:>9,.0f} | "
-            f"{r['wj_dev64_rate']:>10,.0f} {r['wj_dev32_rate']:>10,.0f} | "
-            f"{r['sp_fd_rate']:>9,.0f} {r['sp_jac_rate']:>9,.0f} | "
-            f"{r['wj_float64_rate'] / r['sp_fd_rate']:>6.0f} {r['wj_float64_rate'] / r['sp_jac_rate']:>6.0f} "
-            f"{r['wj_float32_rate'] / r['wj_float64_rate']:>7.2f} "
-            f"{r['wj_f32in_rate'] / r['wj_float64_rate']:>12.2f}"
-        )
-    print(
-        "\naccuracy (median |rel. error| of α vs truth), collapsed fits (α off > 50 %; wardjax flags them, see "
-        "how many it still reported converged), "
-        "max |rel. deviation| of wardjax from SciPy's optimum where SciPy did not collapse:"
-    )
-    for r in rows:
-        a = np.asarray(r["truth"].alpha_x)
-        m = r["m"]
-        parts = [f"N={r['N']:>6}"]
-        for key in ("float64", "float32"):
-            res = r[f"wj_{key}_res"]
-            rel = np.abs(res.params.alpha_x / a - 1)
-            claimed = int(np.sum((rel > 0.5) & res.ok))
-            parts.append(
-                f"wj {key}: {np.median(rel):.2e}, collapsed {int(np.sum(rel > 0.5))}/{len(a)} "
-                f"({claimed} reported converged)"
-            )
-        for key in ("sp_fd", "sp_jac"):
-            xs = r[f"{key}_x"]
-            rel = np.abs(np.abs(xs[:, 4]) / a[:m] - 1)
-            ok = rel <= 0.5
-            dev = 0.0
-            for wk in ("float64", "float32"):
-                res = r[f"wj_{wk}_res"]
-                ours = np.stack(
-                    [
-                        res.params.rho_d[:m, 0],
-                        res.params.rho_d[:m, 1],
-                        res.params.rho_d[:m, 2],
-                        res.params.rho_s[:m],
-                        res.params.alpha_x[:m],
-                    ],
-                    -1,
-                )
-                theirs = np.concatenate([xs[:, :4], np.abs(xs[:, 4:5])], -1)
-                d = np.max(np.abs(ours[ok] / theirs[ok] - 1)) if np.any(ok) else np.nan
-                dev = max(dev, d) if wk == "float64" else dev
-                parts.append(f"dev({wk} vs {key}) {d:.1e}")
-            parts.append(f"{key}: {np.median(rel):.2e}, collapsed {int(np.sum(~ok))}/{m}")
-        print("  " + " | ".join(parts))
+    print("| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |")
+    for k, (name, alpha_range) in enumerate(REGIMES.items()):
+        d = draw_scanlines(n, alpha_range, seed=k)
+        for weighted in (True, False):
+            report_regime(name, weighted, d, bench_regime(d, weighted, scipy_n))
 
 
 def bench_ward(n=10_000_000):
@@ -235,14 +253,13 @@ def bench_ward(n=10_000_000):
 
 
 def main(argv=None):
-    ap = argparse.ArgumentParser()
-    ap.add_argument("--sizes", default="100,1000,10000,100000")
-    ap.add_argument("--scipy-max", type=int, default=1000)
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--n", type=int, default=20_000, help="scanlines per regime")
+    ap.add_argument("--scipy", type=int, default=200, help="scanlines SciPy fits per regime")
     ap.add_argument("--ward-samples", type=int, default=10_000_000)
     args = ap.parse_args(argv if argv is not None else [])
-    sizes = [int(s) for s in args.sizes.split(",")]
-    print(f"JAX {jax.__version__} on {jax.devices()[0].platform}; SciPy runs ≤ {args.scipy_max} scanlines per size.")
-    report(bench_fits(sizes, args.scipy_max))
+    print(f"JAX {jax.__version__} on {jax.devices()[0].platform}")
+    bench_fits(args.n, args.scipy)
     bench_ward(args.ward_samples)
 
 

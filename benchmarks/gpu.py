@@ -97,7 +97,7 @@ def main(argv=None) -> int:
 
     sizes = [int(s) for s in args.sizes.split(",")]
     print(f"JAX {jax.__version__}, devices: {', '.join(d.device_kind for d in jax.devices())}", flush=True)
-    bench_fit.main(["--sizes", args.sizes, "--scipy-max", "200", "--ward-samples", "20000000"])
+    bench_fit.main(["--n", str(sizes[-1]), "--scipy", "200", "--ward-samples", "20000000"])
     stages(min(32768, sizes[-1]))
     chunks(sizes[-1], [int(c) for c in args.chunks.split(",")])
     sys.stdout.flush()

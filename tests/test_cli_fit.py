@@ -75,5 +75,5 @@ def test_fit_keeps_compiled_kernels_between_runs(tmp_path):
     assert outs[0]["params"] == outs[1]["params"] and outs[0]["stderr"] == outs[1]["stderr"]
     # which standard errors each scanline fit reports (docs/engine.md), one kind per scanline
     scan = outs[0]["fit"]["diagnostics"]["scanlines"]
-    assert set(scan["errors"]) == {"gauss_newton", "profile"}
+    assert set(scan["errors"]) == {"gauss_newton", "sandwich", "profile"}
     assert sum(scan["errors"].values()) == scan["count"]

@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from typing import TYPE_CHECKING
 
 import equinox as eqx
 import jax
@@ -25,9 +24,6 @@ from .._status import Status
 from ..ward import NORMALIZATIONS, WardParams, ward_geometry
 from . import _varpro
 from ._data import SAMPLE_FILL, bucket_rows, clean_jit, moments_chunk, pad_rows, pad_samples
-
-if TYPE_CHECKING:
-    from ._scanline import ScanlineFit
 
 __all__ = ["CombinedFit", "combined"]
 
@@ -130,39 +126,44 @@ def _joint_residual(y, a: _JointArgs, iso: bool):
     return jnp.sqrt(jnp.broadcast_to(a.w, a.f.shape)) * r
 
 
-def combined(res: ScanlineFit, model: str, *, errors: str, max_steps: int, rtol: float) -> CombinedFit:
+def combined(
+    data: tuple, status: np.ndarray, normalization: str, model: str, *, errors: str, max_steps: int, rtol: float
+) -> CombinedFit:
+    """The joint refit of the scanlines ``data = (f, wi, wo, mask, weights)`` (as validated by
+    :func:`~wardjax.fit._data.validate`), whose per-scanline fits ended with ``status`` ``(S,)``.
+    """
     iso = model == "isotropic"
     k = 1 if iso else 2
     # Cleaned with both axes padded to bucket sizes (padded samples unusable), so that batches of
     # slightly different shapes share every compiled program below.
-    s_true, n_true = res._data[0].shape[:2]
-    data = [
+    s_true, n_true = data[0].shape[:2]
+    padded = [
         None if a is None else _shapes.pad_to_shape(a, (_shapes.bucket(s_true),), fill)
-        for a, fill in zip(pad_samples(res._data, _shapes.bucket(n_true)), SAMPLE_FILL)
+        for a, fill in zip(pad_samples(data, _shapes.bucket(n_true)), SAMPLE_FILL)
     ]
     f_c, wi_c, wo_c, w_c = (
         np.asarray(a)[:s_true]
-        for a in clean_jit(*(None if a is None else jnp.asarray(a) for a in data), dtype=np.dtype(np.float64))
+        for a in clean_jit(*(None if a is None else jnp.asarray(a) for a in padded), dtype=np.dtype(np.float64))
     )
     # Every scanline with usable data takes part, including those whose own fit
     # saw no lobe: a scanline beside the highlight says where the lobe is *not*,
     # which is exactly what constrains αx.
     wfull = np.broadcast_to(w_c, f_c.shape)
-    use = np.all(np.sum(wfull > 0, axis=1) >= 3, axis=-1) & (res.status != Status.NONFINITE)
+    use = np.all(np.sum(wfull > 0, axis=1) >= 3, axis=-1) & (status != Status.NONFINITE)
     n_use = int(np.sum(use))
     if n_use == 0:
         nan = WardParams.from_estimate(rho_d=np.full(3, np.nan), rho_s=np.nan, alpha_x=np.nan, alpha_y=np.nan)
         return CombinedFit(
             nan,
             nan,
-            np.full((len(res), 3), np.nan),
+            np.full((len(status), 3), np.nan),
             np.full((k + 1, k + 1), np.nan),
             float("nan"),
             0,
             Status.INSUFFICIENT_DATA,
             0,
             model,
-            res.normalization,
+            normalization,
         )
     # Pad the scanline axis to a bucket size with zero-weight rows: one compile per bucket.
     rows = bucket_rows(n_use, 1 << 30)
@@ -170,7 +171,7 @@ def combined(res: ScanlineFit, model: str, *, errors: str, max_steps: int, rtol:
     f_p, wi_p, wo_p, w_p = (pad_rows(a, rows) for a in sel)
     wi_p[n_use:, :, 2] = wo_p[n_use:, :, 2] = 1.0  # padded rows: straight up, weight 0
     args, prepared = _joint_prepare(
-        f_p, wi_p, wo_p, w_p, np.int32(n_true), np.int32(NORMALIZATIONS.index(res.normalization))
+        f_p, wi_p, wo_p, w_p, np.int32(n_true), np.int32(NORMALIZATIONS.index(normalization))
     )
     log_a, rs0 = (float(v) for v in _joint_grid_start(prepared))
     y = jnp.asarray([math.log(max(rs0, 1e-6))] + [log_a] * k, jnp.float64)
@@ -229,7 +230,7 @@ def combined(res: ScanlineFit, model: str, *, errors: str, max_steps: int, rtol:
     grad = np.asarray(_joint_rho_d_mean_grad(jnp.asarray(y), args, iso, jnp.asarray(n_use))) / nat[None, :]
     rho_d_var = noise_var + np.einsum("ip,pq,iq->i", grad, cov, grad)
 
-    rho_d_full = np.full((len(res), 3), np.nan)
+    rho_d_full = np.full((len(status), 3), np.nan)
     rho_d_full[use] = rho_d_s
     ax, ay = (nat[1], nat[1]) if iso else (nat[1], nat[2])
     sx, sy = (se[1], se[1]) if iso else (se[1], se[2])
@@ -245,7 +246,7 @@ def combined(res: ScanlineFit, model: str, *, errors: str, max_steps: int, rtol:
         status=status,
         n_scanlines=n_use,
         model=model,
-        normalization=res.normalization,
+        normalization=normalization,
         covariance_model=cov_model,
         covariance_robust=cov_robust,
         errors=used,

@@ -9,15 +9,16 @@ Wilks' theorem):
 
 * α: ``χ²_p(θ) = min_{ρd, ρs} χ²`` is exact by variable projection
   (``K₀ − ⟨b̃, f̃⟩² / ⟨b̃, b̃⟩``, :func:`~wardjax.fit._varpro.stats`), evaluated on a
-  grid of ``θ = log α`` of ``±PROFILE_HALF`` Gauss–Newton standard errors;
+  at the ``θ = log α`` where it crosses, found from ``θ̂ ± σ_θ`` by false position in
+  ``√Δχ²`` (linear in θ where χ² is quadratic) within ``±PROFILE_HALF`` standard errors;
 * ρs: ``χ²_p(s) = min_θ (K₀ − 2 s ⟨b̃, f̃⟩(θ) + s² ⟨b̃, b̃⟩(θ))``, traced along its
-  path: at each grid θ the ``s`` for which that θ is the minimiser,
-  ``s*(θ) = ⟨b̃', f̃⟩ / ⟨b̃', b̃⟩`` (``∂χ²/∂θ = 0``), with ``χ²_p(s*(θ))`` exact, on a θ
-  grid narrowed by the ρs–α correlation ``|r|`` (the path reaches ``ŝ ± σ_s`` near
-  ``θ̂ ± |r| σ_θ``);
+  path: at each θ the ``s`` for which that θ is the minimiser,
+  ``s*(θ) = ⟨b̃', f̃⟩ / ⟨b̃', b̃⟩`` (``∂χ²/∂θ = 0``), with ``χ²_p(s*(θ))`` exact, the
+  crossing sought the same way from ``θ̂ ± |r| σ_θ`` (the path reaches ``ŝ ± σ_s``
+  near there, ``r`` the ρs–α correlation);
 
 and the interval's ends are where ``χ²_p`` rises by one residual variance ``χ²/dof``
-above its minimum (linear interpolation between grid points). The standard error
+above the fit's minimum. The standard error
 reported is its half-width. Isotropic fits only; anisotropic scanline fits keep the
 Gauss–Newton errors.
 """
@@ -32,64 +33,78 @@ import jax.numpy as jnp
 
 from . import _varpro
 
-__all__ = ["PROFILE_HALF", "PROFILE_POINTS", "profile_chunk", "profile_errors"]
+__all__ = ["PROFILE_HALF", "PROFILE_ITERATIONS", "profile_chunk", "profile_errors"]
 
-PROFILE_HALF = 6.0  # grid half-width, in Gauss–Newton standard errors of log α
-PROFILE_POINTS = 33
+PROFILE_HALF = 6.0  # farthest a crossing is sought, in Gauss–Newton standard errors of log α
+PROFILE_ITERATIONS = 4  # evaluations per side and parameter: a probe, then false-position steps
 
 
-def _crossings(c, delta):
-    """Where ``delta`` (M,) first reaches 1 on each side of its minimum.
+def _crossing(delta_fn, x0, step, direction):
+    """Where ``√Δ`` reaches 1 going from the optimum ``x0`` in ``direction`` (±1): ``(t, v)``.
 
-    Interpolated linearly in ``√delta``, which is exactly linear in ``c`` where χ² is quadratic.
+    ``delta_fn(x) -> (Δ, v)`` is the profile's rise (in residual variances) at ``x`` and the
+    value reported there. ``√Δ`` is linear in ``x`` where χ² is quadratic, so the first probe
+    at ``x0 ± step`` and the false-position steps after it (secant extrapolation until the
+    crossing is bracketed) converge in a few evaluations. Returns the crossing's distance
+    ``t`` and ``v`` interpolated there.
     """
-    i0 = jnp.argmin(delta)
-    idx = jnp.arange(c.shape[0])
-    above = delta >= 1.0
-    right = jnp.where(above & (idx > i0), idx, c.shape[0] - 1).min()
-    left = jnp.where(above & (idx < i0), idx, 0).max()
-
-    root = jnp.sqrt(jnp.maximum(delta, 0.0))  # linear in the parameter where χ² is quadratic
-
-    def interp(j, k):  # between j (below) and k (above, or the grid end)
-        dj, dk = root[j], root[k]
-        t = jnp.clip((1.0 - dj) / jnp.where(dk > dj, dk - dj, 1.0), 0.0, 1.0)
-        return c[j] + t * (c[k] - c[j])
-
-    hi = interp(jnp.maximum(right - 1, 0), right)
-    lo = interp(jnp.minimum(left + 1, c.shape[0] - 1), left)
-    return lo, hi
+    t_max = PROFILE_HALF * step
+    _, v0 = delta_fn(x0)
+    lo = (jnp.zeros_like(step), jnp.zeros_like(step), v0)  # (t, √Δ, v) below the crossing
+    hi = (t_max, jnp.full_like(step, jnp.inf), v0)  # above it, once found
+    has_hi = jnp.zeros((), bool)
+    t = step
+    for _ in range(PROFILE_ITERATIONS):
+        d, v = delta_fn(x0 + direction * t)
+        root = jnp.sqrt(jnp.maximum(jnp.where(jnp.isfinite(d), d, jnp.inf), 0.0))
+        above = root >= 1.0
+        lo = jax.tree_util.tree_map(lambda new, old: jnp.where(above, old, new), (t, root, v), lo)
+        hi = jax.tree_util.tree_map(lambda new, old: jnp.where(above, new, old), (t, root, v), hi)
+        has_hi = has_hi | above
+        t_lo, r_lo, _ = lo
+        t_hi, r_hi, _ = hi
+        bracket = t_lo + (1.0 - r_lo) * (t_hi - t_lo) / jnp.where(jnp.isfinite(r_hi), r_hi - r_lo, 1.0)
+        extrap = jnp.where(r_lo > 0, t_lo / jnp.where(r_lo > 0, r_lo, 1.0), 2.0 * t_lo)
+        t = jnp.where(has_hi & jnp.isfinite(r_hi), bracket, jnp.minimum(extrap, 4.0 * t_lo))
+        t = jnp.clip(t, 0.0, t_max)
+    t_lo, r_lo, v_lo = lo
+    t_hi, r_hi, v_hi = hi
+    ok = has_hi & jnp.isfinite(r_hi) & (r_hi > r_lo)
+    frac = jnp.where(ok, (1.0 - r_lo) / jnp.where(ok, r_hi - r_lo, 1.0), 1.0)
+    return jnp.where(ok, t_lo + frac * (t_hi - t_lo), t_max), jnp.where(ok, v_lo + frac * (v_hi - v_lo), v_lo)
 
 
 def profile_errors(p: _varpro.Prepared, alpha, rho_s, chi2, cov, scale):
     """``(σ_ρs, σ_α)``: half-widths of the 68 % profile-likelihood intervals of one isotropic scanline.
 
     ``alpha``, ``rho_s``, ``chi2`` are the fit's optimum, ``cov`` its Gauss–Newton
-    covariance (natural parameters, scaled), ``scale = χ²/dof``.
+    covariance (natural parameters, scaled), ``scale = χ²/dof``. Each of the four interval
+    ends costs :data:`PROFILE_ITERATIONS` evaluations of the sums.
     """
     theta0 = jnp.log(alpha)
     scale = jnp.where(scale > 0, scale, 1.0)
     sd_t = jnp.sqrt(jnp.abs(cov[4, 4])) / alpha
-    c = jnp.linspace(-PROFILE_HALF, PROFILE_HALF, PROFILE_POINTS, dtype=alpha.dtype)
     lo_b, hi_b = math.log(_varpro.ALPHA_MIN), math.log(_varpro.ALPHA_MAX)
-    thetas = jnp.clip(theta0 + sd_t * c, lo_b, hi_b)
-    sts = jax.vmap(lambda t: _varpro.stats(t[None], p, True, with_jac=False))(thetas)
-    chi_min = jnp.minimum(chi2, jnp.min(sts.chi2))
-    d_alpha = (sts.chi2 - chi_min) / scale
-    lo, hi = _crossings(thetas, d_alpha)
-    sigma_alpha = 0.5 * (jnp.exp(hi) - jnp.exp(lo))
-    # ρs: the path of its profile, s*(θ) = ⟨b̃', f̃⟩ / ⟨b̃', b̃⟩ = s − Jᵀr / (s ⟨b̃', b̃⟩), on a θ grid
-    # narrowed by the correlation (the path reaches ŝ ± σ_s at θ̂ ± |r| σ_θ).
+
+    def rise_alpha(theta):
+        theta = jnp.clip(theta, lo_b, hi_b)
+        st = _varpro.stats(theta[None], p, True, with_jac=False)
+        return (st.chi2 - chi2) / scale, jnp.exp(theta)
+
+    def rise_rho_s(theta):  # along the ρs profile's path: s*(θ) = s − Jᵀr / (s ⟨b̃', b̃⟩)
+        theta = jnp.clip(theta, lo_b, hi_b)
+        st = _varpro.stats(theta[None], p, True)
+        den = st.s * st.spb[0]
+        s_star = jnp.maximum(jnp.where(den != 0, st.s - st.jtr[0] / jnp.where(den != 0, den, 1.0), st.s), 0.0)
+        prof = p.k0 - 2.0 * s_star * st.sbf + s_star * s_star * st.sbb
+        return (prof - chi2) / scale, s_star
+
+    ends_a = [_crossing(rise_alpha, theta0, sd_t, d)[1] for d in (1.0, -1.0)]
+    # The ρs path reaches ŝ ± σ_s near θ̂ ± |r| σ_θ.
     corr = jnp.abs(cov[3, 4]) / jnp.sqrt(jnp.abs(cov[3, 3] * cov[4, 4]))
-    narrow = jnp.clip(1.5 * jnp.where(jnp.isfinite(corr), corr, 1.0), 0.05, 1.0)
-    path = jax.vmap(lambda t: _varpro.stats(t[None], p, True))(jnp.clip(theta0 + narrow * sd_t * c, lo_b, hi_b))
-    s_t, spb, jtr = path.s, path.spb[:, 0], path.jtr[:, 0]
-    den = s_t * spb
-    s_star = jnp.maximum(jnp.where(den != 0, s_t - jtr / jnp.where(den != 0, den, 1.0), s_t), 0.0)
-    prof_s = p.k0 - 2.0 * s_star * path.sbf + s_star * s_star * path.sbb
-    d_s = (prof_s - jnp.minimum(chi_min, jnp.min(prof_s))) / scale
-    lo_s, hi_s = _crossings(s_star, d_s)
-    return 0.5 * jnp.abs(hi_s - lo_s), sigma_alpha
+    narrow = jnp.clip(jnp.where(jnp.isfinite(corr), corr, 1.0), 0.05, 1.0)
+    ends_s = [_crossing(rise_rho_s, theta0, narrow * sd_t, d)[1] for d in (1.0, -1.0)]
+    return 0.5 * jnp.abs(ends_s[0] - ends_s[1]), 0.5 * jnp.abs(ends_a[0] - ends_a[1])
 
 
 @functools.partial(jax.jit)

@@ -162,7 +162,9 @@ class ScanlineFit:
         check_choice("model", model, ("isotropic", "anisotropic"))
         check_choice("errors", errors, ("robust", "model"))
         with jax.enable_x64(True):
-            return combined(self, model, errors=errors, max_steps=max_steps, rtol=rtol)
+            return combined(
+                self._data, self.status, self.normalization, model, errors=errors, max_steps=max_steps, rtol=rtol
+            )
 
 
 @functools.partial(jax.jit, static_argnames=("normalization", "dtype"))
@@ -179,10 +181,19 @@ def _search_chunk(prepared, *, iso, rtol, check):
     return jax.vmap(lambda p: _varpro.solve_scanline(p, iso=iso, rtol=rtol, check=check))(prepared)
 
 
-def _fast_chunk(f, wi, wo, mask, weights, n, *, iso, rtol, normalization, dtype, check):
+@jax.jit
+def _sandwich_chunk(sol: _varpro.ScanlineSolution, f, u, v, g, w) -> _varpro.ScanlineSolution:
+    """``sol`` with ``cov`` replaced by :func:`~wardjax.fit._varpro.sandwich_covariance` (from the geometry stage)."""
+    scale = sol.chi2 / jnp.maximum(sol.dof, 1).astype(sol.chi2.dtype)
+    hc = jax.vmap(_varpro.sandwich_covariance)(jnp.log(sol.alpha), sol.rho_s, sol.cov_gn, scale, f, u, v, g, w)
+    return sol._replace(cov=hc)
+
+
+def _fast_chunk(f, wi, wo, mask, weights, n, *, iso, rtol, normalization, dtype, check, sandwich):
     # Geometry and moments as separate programs too: ~25 % less CPU than one.
     parts = _geometry_chunk(f, wi, wo, mask, weights, normalization=normalization, dtype=dtype)
-    return _search_chunk(moments_chunk(*parts, n, iso=iso), iso=iso, rtol=rtol, check=check)
+    sol = _search_chunk(moments_chunk(*parts, n, iso=iso), iso=iso, rtol=rtol, check=check)
+    return _sandwich_chunk(sol, *parts) if sandwich else sol
 
 
 def fit_scanlines(
@@ -273,6 +284,9 @@ def fit_scanlines(
     data = (f, wi, wo, mask, weights)
     kw = dict(iso=iso, normalization=normalization, solver=solver, devices=devices)
     check = errors == "auto"
+    # Without weights the residual variance is unknown and may follow the signal: the sandwich.
+    sandwich = weights is None and errors != "gauss_newton" and solver == "fast"
+    kw["sandwich"] = sandwich
     sol = _solve(data, dtype=dtype, chunk=chunk, check=check, **kw)
     if dtype == np.float32 and solver == "fast":
         # A float32 fit that is not certified (rounding can cancel the
@@ -292,7 +306,7 @@ def fit_scanlines(
         _profile_where_nonlinear(sol, data, normalization=normalization, devices=devices)
     else:
         sol.nonlinear[:] = 0
-    return _assemble(sol, data, model, normalization, solver)
+    return _assemble(sol, data, model, normalization, solver, sandwich)
 
 
 # What a padded sample of each input of ``data = (f, wi, wo, mask, weights)`` holds: unusable, weight 0.
@@ -323,7 +337,9 @@ def _placement(devices):
     return jax.sharding.NamedSharding(mesh, jax.sharding.PartitionSpec("scanline"))
 
 
-def _solve(data, *, iso, normalization, solver, dtype, chunk, devices=None, check=True) -> _varpro.ScanlineSolution:
+def _solve(
+    data, *, iso, normalization, solver, dtype, chunk, devices=None, check=True, sandwich=False
+) -> _varpro.ScanlineSolution:
     """Run the kernel over ``data = (f, wi, wo, mask, weights)`` in chunks; float64 NumPy results.
 
     The fast kernel sees the samples padded to :func:`~wardjax._shapes.bucket`
@@ -350,7 +366,16 @@ def _solve(data, *, iso, normalization, solver, dtype, chunk, devices=None, chec
             rows = -(-rows // len(devices)) * len(devices)  # whole rows on every device
             args = [None if a is None else jax.device_put(pad_rows(a[start:stop], rows), sharding) for a in data]
             if solver == "fast":
-                out = _fast_chunk(*args, n=n, iso=iso, rtol=rtol, normalization=normalization, dtype=dtype, check=check)
+                out = _fast_chunk(
+                    *args,
+                    n=n,
+                    iso=iso,
+                    rtol=rtol,
+                    normalization=normalization,
+                    dtype=dtype,
+                    check=check,
+                    sandwich=sandwich,
+                )
             else:
                 out = _optimistix_chunk(*clean(*args, dtype=dtype), normalization=normalization)
             pieces.append((out, stop - start))  # dispatched asynchronously
@@ -378,7 +403,7 @@ def _profile_where_nonlinear(sol: _varpro.ScanlineSolution, data, *, normalizati
     # 33 profile points per row: at most a quarter of the fit's rows per call on an accelerator.
     chunk = min(_default_chunk(np.float64, devices), _ACCELERATOR_CHUNK // 4) * len(devices)
     scale = np.asarray(sol.chi2, np.float64)[rows] / np.maximum(np.asarray(sol.dof)[rows], 1)
-    fit = [np.asarray(a, np.float64)[rows] for a in (sol.alpha[:, 0], sol.rho_s, sol.chi2, sol.cov)]
+    fit = [np.asarray(a, np.float64)[rows] for a in (sol.alpha[:, 0], sol.rho_s, sol.chi2, sol.cov_gn)]
     with jax.enable_x64(True):
         n = None if n_pad == n_true else jnp.asarray(n_true, jnp.int32)
         out = []
@@ -391,8 +416,8 @@ def _profile_where_nonlinear(sol: _varpro.ScanlineSolution, data, *, normalizati
             sig = _profile.profile_chunk(prepared, *pick)
             out.append(np.stack([np.asarray(v)[: stop - start] for v in sig], -1))
         sig = np.concatenate(out)
-    cov = sol.cov[rows]
-    gn = np.sqrt(np.clip(np.diagonal(cov, axis1=-2, axis2=-1)[:, 3:5], 0.0, None))
+    cov = sol.cov[rows]  # the sandwich for unweighted fits: scaled by the profile's ratio to Gauss–Newton
+    gn = np.sqrt(np.clip(np.diagonal(sol.cov_gn[rows], axis1=-2, axis2=-1)[:, 3:5], 0.0, None))
     ratio = np.ones((rows.size, cov.shape[-1]))
     good = np.all(np.isfinite(sig) & (sig > 0), axis=-1) & np.all(gn > 0, axis=-1)
     ratio[good, 3:5] = sig[good] / gn[good]
@@ -400,7 +425,7 @@ def _profile_where_nonlinear(sol: _varpro.ScanlineSolution, data, *, normalizati
     sol.nonlinear[rows] = np.where(good, 1, 0)
 
 
-def _assemble(sol, data, model, normalization, solver) -> ScanlineFit:
+def _assemble(sol, data, model, normalization, solver, sandwich=False) -> ScanlineFit:
     alpha = sol.alpha
     ax = alpha[:, 0]
     ay = alpha[:, -1]
@@ -419,7 +444,7 @@ def _assemble(sol, data, model, normalization, solver) -> ScanlineFit:
         normalization=normalization,
         solver=solver,
         _data=data,
-        errors=np.where(sol.nonlinear.astype(bool), "profile", "gauss_newton"),
+        errors=np.where(sol.nonlinear.astype(bool), "profile", "sandwich" if sandwich else "gauss_newton"),
     )
 
 
@@ -469,7 +494,7 @@ def _optimistix_scanline(f, wi, wo, w, normalization):
         jnp.where(~finite, Status.NONFINITE, jnp.where(ok, Status.CONVERGED, Status.MAX_STEPS)),
     ).astype(jnp.int32)
     no_check = jnp.zeros((), jnp.int32)  # the reference path reports Gauss–Newton errors
-    return _varpro.ScanlineSolution(y[:3], jnp.exp(y[3]), jnp.exp(y[4:5]), cov, chi2, dof, status, no_check)
+    return _varpro.ScanlineSolution(y[:3], jnp.exp(y[3]), jnp.exp(y[4:5]), cov, chi2, dof, status, no_check, cov)
 
 
 @functools.partial(jax.jit, static_argnames="normalization")

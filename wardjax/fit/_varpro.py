@@ -408,6 +408,7 @@ class ScanlineSolution(NamedTuple):
     dof: Int[Array, ""]
     status: Int[Array, ""]
     nonlinear: Int[Array, ""]  # 1 where the curvature check fails (:func:`curvature_check`)
+    cov_gn: Float[Array, "p p"]  # the Gauss–Newton covariance (``cov`` unless it is the sandwich)
 
 
 def _inv_small(a):
@@ -457,49 +458,113 @@ def covariance(theta, st: Stats, p: Prepared, scale):
     return cov * scale
 
 
-def curvature_check(theta, st: Stats, p: Prepared, cov, scale):
+def curvature_check(theta, chi2, s_hat, p: Prepared, cov, scale):
     """Is the Gauss–Newton covariance trustworthy here? ``1`` where it is not (isotropic fits).
 
-    The covariance predicts that moving one standard error from the optimum raises
-    the profiled χ² by one residual variance. Checked four ways, each one evaluation
-    of :func:`stats` without derivatives:
+    Two evaluations of :func:`stats` without derivatives, at ``θ± = θ̂ ± σ_θ``. At a fixed
+    roughness the model is linear in ρd and ρs, so each gives the exact χ² there for *every*
+    ``ρs`` (``χ²(θ, s) = K₀ − 2 s ⟨b̃, f̃⟩ + s² ⟨b̃, b̃⟩``, ρd profiled out). The Gauss–Newton
+    covariance predicts, in units of the residual variance ``χ²/dof`` and in standardised
+    coordinates ``(z_s, z_θ)`` with correlation ``r``,
+    ``Δχ²(z_s, z_θ) = (z_s² − 2 r z_s z_θ + z_θ²) / (1 − r²)``. Checked:
 
-    * α: ``Δχ²(θ̂ ± σ_θ) / (χ²/dof)``, exact profile over ρd and ρs (variable projection);
-    * ρs: ``χ²(θ̂ + β δ, ŝ ± σ_s)`` along the covariance's conditional line
-      ``β = cov(ρs, α) / (α var ρs)`` with ``δ = ±σ_s`` (``χ²(θ, s) = K₀ − 2 s ⟨b̃, f̃⟩ +
-      s² ⟨b̃, b̃⟩`` for any ``s``): an upper bound of the profile there.
+    * α: the profile over ρs at ``θ±`` (``min_s``, exact by variable projection) rises by 1;
+    * ρs: at the corners ``(z_s, z_θ) = ±(1, sign r)``, nearest the ρs profile's path
+      (which passes ``(±1, ±r)``), χ² rises by ``2 / (1 + |r|)``.
 
-    The check fails when any of the four lies outside ``1 ± CURVATURE_TOL`` (widened by
-    the rounding allowance ``64 ε K₀ / (χ²/dof)``, which matters in float32 only): the
-    likelihood is not quadratic over one standard error (a lobe spanning few samples,
-    a weakly detected lobe), and :func:`wardjax.fit._profile.profile_errors` replaces the
-    standard errors of ρs and α by profile-likelihood ones.
+    The check fails when any of the four rises differs from its prediction by more than
+    ``CURVATURE_TOL`` times the prediction (widened by the rounding allowance
+    ``64 ε K₀ / (χ²/dof)``, which matters in float32 only): the likelihood is not quadratic
+    over one standard error (a lobe spanning few samples, a weakly detected lobe), and
+    :func:`wardjax.fit._profile.profile_errors` replaces the standard errors of ρs and α by
+    profile-likelihood ones.
     """
     alpha = jnp.exp(theta[0])
     var_s, var_a, cov_sa = cov[3, 3], cov[4, 4], cov[3, 4]
     scale = jnp.where(scale > 0, scale, 1.0)
     sd_t = jnp.sqrt(jnp.abs(var_a)) / alpha
     sd_s = jnp.sqrt(jnp.abs(var_s))
-    beta = cov_sa / jnp.where(var_s > 0, var_s, 1.0) / alpha
-    rises = []
+    den = jnp.sqrt(jnp.abs(var_s * var_a))
+    r = jnp.clip(jnp.where(den > 0, cov_sa / jnp.where(den > 0, den, 1.0), 0.0), -0.999, 0.999)
+    corner = 2.0 / (1.0 + jnp.abs(r))
+    sign_r = jnp.where(r < 0, -1.0, 1.0)
+    rises, predicted = [], []
     for sign in (1.0, -1.0):
-        st_a = stats(theta + sign * sd_t, p, True, with_jac=False)
-        rises.append((st_a.chi2 - st.chi2) / scale)
-        ds = sign * sd_s
-        st_s = stats(theta + beta * ds, p, True, with_jac=False)
-        s_new = jnp.maximum(st.s + ds, 0.0)
-        chi = p.k0 - 2.0 * s_new * st_s.sbf + s_new * s_new * st_s.sbb
-        rises.append((chi - st.chi2) / scale)
-    rises = jnp.stack(rises)
+        st_t = stats(theta + sign * sd_t, p, True, with_jac=False)
+        rises.append((st_t.chi2 - chi2) / scale)
+        predicted.append(jnp.ones_like(corner))
+        s_new = jnp.maximum(s_hat + sign * sign_r * sd_s, 0.0)
+        chi = p.k0 - 2.0 * s_new * st_t.sbf + s_new * s_new * st_t.sbb
+        rises.append((chi - chi2) / scale)
+        predicted.append(corner)
+    rises, predicted = jnp.stack(rises), jnp.stack(predicted)
     # χ² differences round at ε K₀ (the centred sums cancel): no verdict below that. In
     # float64 this is far below the tolerance; in float32 it lets high-signal fits pass.
     rounding = 64.0 * jnp.finfo(scale.dtype).eps * p.k0 / scale
-    bad = jnp.any(~(jnp.abs(rises - 1.0) <= CURVATURE_TOL + rounding))
+    bad = jnp.any(~(jnp.abs(rises - predicted) <= CURVATURE_TOL * predicted + rounding))
     return bad.astype(jnp.int32)
 
 
+def sandwich_covariance(theta, rho_s, cov, scale, f, u, v, g, w):
+    """Heteroscedasticity-consistent (sandwich, HC0) covariance of ``(ρd RGB, ρs, α…)``.
+
+    ``Σ_HC = B⁻¹ (Σ_i w_i² r_i² J_iᵀ J_i) B⁻¹`` (White 1980) with ``B⁻¹ = cov / (χ²/dof)``
+    the unscaled Gauss–Newton covariance, ``r_i`` the residual and ``J_i`` the gradient of
+    the model at observation ``i`` (``∂/∂ρd_c = δ/π``, ``∂/∂ρs = b``,
+    ``∂/∂α_k = ρs b ∂log b/∂log α_k / α_k``). It needs no noise model: it holds when the
+    residual variance changes along the scanline (photon noise grows with the signal),
+    where ``B⁻¹ χ²/dof`` assumes one variance for all samples. One pass over the samples
+    at the optimum ``θ`` (log α, or log αx, log αy) and ``ρs``: ``f`` (3, N), ``u, v, g``
+    (N,), ``w`` (C, N) as the kernel's geometry stage leaves them (sample axis last,
+    weight 0 where a value is unusable). Returns (P, P).
+    """
+    k = theta.shape[0]
+    n = g.shape[0]
+    alpha = jnp.exp(theta)
+    if k == 1:
+        inv = jnp.exp(-2.0 * theta[0])
+        t = u + v
+        b = g * jnp.exp(-t * inv) * inv
+        dlog = (2.0 * t * inv - 2.0)[None, :]  # (1, N) ∂log b/∂log α
+    else:
+        ix, iy = jnp.exp(-2.0 * theta[0]), jnp.exp(-2.0 * theta[1])
+        b = g * jnp.exp(-(u * ix + v * iy) - theta[0] - theta[1])
+        dlog = jnp.stack([2.0 * u * ix - 1.0, 2.0 * v * iy - 1.0])  # (2, N)
+    ww = jnp.broadcast_to(w, (3, n))
+    ones = jnp.ones((n,), b.dtype)
+    # Every sum over samples is one mat-vec against ones of materialised products (the
+    # barriers): XLA:CPU vectorises those, where a fused multiply-reduce runs serially and
+    # small batched matmuls run one fit at a time (see :func:`stats`).
+    spec = rho_s * b
+    resid = jax.lax.optimization_barrier(f - spec[None, :])
+    wsum = jnp.where(ww.sum(-1) > 0, ww.sum(-1), 1.0)
+    # ρd per channel at this (θ, ρs) solves its normal equation: the weighted mean of f − ρs b.
+    resid = resid - ((ww * resid) @ ones / wsum)[:, None]  # (3, N)
+    # J per observation: one-hot ρd_c / π, then b, then ρs b ∂log b/∂log α_k / α_k.
+    jl = jnp.concatenate([b[None, :], spec[None, :] * dlog / alpha[:, None]], axis=0)  # (1+k, N)
+    bread = cov / jnp.where(scale > 0, scale, 1.0)
+    r2 = (ww * resid) ** 2  # (3, N)
+    r2tot = jnp.sum(r2, axis=0)
+    pairs = [(i, j) for i in range(1 + k) for j in range(i, 1 + k)]
+    prods = jnp.concatenate(
+        [r2, (r2[:, None, :] * jl[None, :, :]).reshape(-1, n), jnp.stack([jl[i] * jl[j] * r2tot for i, j in pairs])]
+    )
+    sums = jax.lax.optimization_barrier(prods) @ ones
+    dd = jnp.diag(sums[:3]) / jnp.pi**2
+    dl = sums[3 : 3 + 3 * (1 + k)].reshape(3, 1 + k) / jnp.pi
+    ll = jnp.zeros((1 + k, 1 + k), b.dtype)
+    for m, (i, j) in enumerate(pairs):
+        val = sums[3 + 3 * (1 + k) + m]
+        ll = ll.at[i, j].set(val).at[j, i].set(val)
+    meat = jnp.block([[dd, dl], [dl.T, ll]])
+    return bread @ meat @ bread
+
+
 def solve_scanline(p: Prepared, *, iso: bool, rtol: float, check: bool = True) -> ScanlineSolution:
-    """Search and statistics of one prepared scanline (stage B, vmapped over a chunk)."""
+    """Search and statistics of one prepared scanline (stage B, vmapped over a chunk).
+
+    ``check``: run :func:`curvature_check` (isotropic fits).
+    """
     theta = grid_start(p)
     if iso:
         theta, st = lm(theta, p, True, ISO_STEPS, rtol)
@@ -556,9 +621,9 @@ def solve_scanline(p: Prepared, *, iso: bool, rtol: float, check: bool = True) -
             jnp.where(at_bound, Status.AT_BOUND, jnp.where(small, Status.CONVERGED, Status.MAX_STEPS)),
         ),
     )
-    nonlinear = curvature_check(theta, st, p, cov, scale) if iso and check else jnp.zeros((), jnp.int32)
+    nonlinear = curvature_check(theta, st.chi2, s, p, cov, scale) if iso and check else jnp.zeros((), jnp.int32)
     nonlinear = jnp.where(status == Status.CONVERGED, nonlinear, 0)
-    return ScanlineSolution(rho_d, s, jnp.exp(theta), cov, st.chi2, dof, status.astype(jnp.int32), nonlinear)
+    return ScanlineSolution(rho_d, s, jnp.exp(theta), cov, st.chi2, dof, status.astype(jnp.int32), nonlinear, cov)
 
 
-__all__ = ["Prepared", "ScanlineSolution", "prepare", "solve_scanline"]
+__all__ = ["Prepared", "ScanlineSolution", "prepare", "sandwich_covariance", "solve_scanline"]

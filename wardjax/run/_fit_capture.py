@@ -336,7 +336,7 @@ def _diagnostics(
             "samples": int(np.sum(n_per)),
             "status": {str(k): int(c) for k, c in zip(names, cnt)},
             # which standard errors of ρs and α each scanline fit reports (ScanlineFit.errors)
-            "errors": {m: int(np.sum(res.errors == m)) for m in ("gauss_newton", "profile")},
+            "errors": {m: int(np.sum(res.errors == m)) for m in ("gauss_newton", "sandwich", "profile")},
             "alpha_median": float(np.nanmedian(res.params.alpha_x)),
             "rho_s_median": float(np.nanmedian(res.params.rho_s)),
             "x_range_mm": [float(np.min(x_scan)), float(np.max(x_scan))],
