@@ -88,7 +88,8 @@ def _footprint_mm(camera: Camera, rho_d: np.ndarray, band_rows: int) -> tuple[np
             u, v = cc[sub].astype(np.float64), rows[rr[sub]].astype(np.float64)
             pu, _ = back_project(camera, u + 1.0, v)
             pv, _ = back_project(camera, u, v + 1.0)
-            area = np.abs(np.cross((pu - pts[sub])[:, :2], (pv - pts[sub])[:, :2]))
+            a, b = pu - pts[sub], pv - pts[sub]
+            area = np.abs(a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0])
             sides.append(np.sqrt(area[np.isfinite(area)]))
     if not np.all(np.isfinite(lo)) or not sides:
         raise ValueError("no measured ρd pixel meets the sample plane: nothing to rectify")
