@@ -12,14 +12,14 @@ with ``F0 = 0.04 · specularFactor · specularColorFactor``, ``F90 = specularFac
 ``α_b = roughnessFactor²`` across and ``α_t = α_b + (1 − α_b) · anisotropyStrength²``
 along the direction ``anisotropyRotation`` (radians, from the mesh tangent
 towards the bitangent). The export sets ``metallicFactor = 0``, the lobe from
-:func:`~._microfacet.fit_microfacet` (``target = "gltf"``: ``F0``, ``F90``,
+`fit_microfacet` (``target = "gltf"``: ``F0``, ``F90``,
 ``α_x``, ``α_y`` fitted together with the diffuse coupling) and
 ``baseColorFactor = ρd / (1 − F0)`` (glTF's diffuse is ``(1 − F) c_base/π``).
 
 The file carries one quad (the sample, ``width × height`` metres, normal
 ``+Y``, its tangent the material tangent) so that a viewer shows the material
 as it is; glTF's axes are the sample frame's ``(x, z, −y)``.
-:func:`gltf_material_brdf` evaluates a material of such a file from its JSON
+`gltf_material_brdf` evaluates a material of such a file from its JSON
 fields, written from the specification's text alone.
 """
 
@@ -117,7 +117,7 @@ def gltf_document(
     rho_d
         Diffuse reflectance RGB (linear, sRGB primaries).
     fit
-        A ``"gltf"`` :class:`~._microfacet.MicrofacetFit`.
+        A ``"gltf"`` `MicrofacetFit`.
     size_m
         The quad's ``(width, height)`` in metres (glTF's unit).
     tangent

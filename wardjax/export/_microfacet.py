@@ -31,7 +31,7 @@ directions ``ω_o`` (0–75° from the normal, three azimuths):
 
     E(θ) = \\sum_{ω_o} \\int_{Ω} \\bigl(f_\\mathrm{Ward} - f_θ\\bigr)^2 \\cos θ_i\\,dω_i,
 
-a least-squares problem (:class:`optimistix.LevenbergMarquardt` in log
+a least-squares problem (`LevenbergMarquardt` in log
 coordinates) over a deterministic quadrature: a stratified grid drawn half
 from Ward's own lobe (Walter 2005's importance sampling, widened 1.5×) and
 half from the cosine, each node weighted by ``1/pdf`` of the mixture. The
@@ -142,7 +142,7 @@ def gltf_dielectric_specular(wi, wo, f0, f90, alpha_x, alpha_y):
 
 
 class MicrofacetFit(NamedTuple):
-    """The microfacet equivalent of a Ward lobe (:func:`fit_microfacet`).
+    """The microfacet equivalent of a Ward lobe (`fit_microfacet`).
 
     Attributes
     ----------
@@ -272,7 +272,13 @@ def _solve(theta0, prob: _Problem, distribution: str, target: str, iso: bool) ->
             cache[key] = (np.asarray(r), np.asarray(j))
         return cache[key]
 
-    sol = least_squares(lambda t: both(t)[0], np.asarray(theta0), jac=lambda t: both(t)[1], method="lm", xtol=1e-10)
+    sol = least_squares(
+        lambda t: both(t)[0],
+        np.asarray(theta0),
+        jac=lambda t: both(t)[1],  # pyright: ignore[reportArgumentType]
+        method="lm",
+        xtol=1e-10,
+    )
     return sol.x
 
 
@@ -289,7 +295,7 @@ def fit_microfacet(
     Parameters
     ----------
     params
-        One (unbatched) :class:`~wardjax.WardParams`; a coloured ``ρs`` is
+        One (unbatched) `WardParams`; a coloured ``ρs`` is
         fitted on its mean (scale ``k_s`` by the colour afterwards).
     normalization
         The Ward normalisation ``params`` were fitted in.
@@ -317,9 +323,7 @@ def fit_microfacet(
     rho_s = float(np.mean(np.asarray(params.rho_s)))
     rho_d = float(np.mean(np.asarray(params.rho_d)))
     if not (ax > 0 and ay > 0 and math.isfinite(ax * ay) and rho_s > 0 and math.isfinite(rho_s)):
-        raise ValueError(
-            f"a microfacet fit needs ρs > 0 and α > 0, finite; got ρs = {rho_s}, αx = {ax}, αy = {ay}"
-        )
+        raise ValueError(f"a microfacet fit needs ρs > 0 and α > 0, finite; got ρs = {rho_s}, αx = {ax}, αy = {ay}")
     iso = (ax == ay) if isotropic is None else isotropic
     with jax.enable_x64(True):
         wi, wo, w = quadrature(ax, ay)

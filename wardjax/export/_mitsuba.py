@@ -1,7 +1,7 @@
 """Mitsuba 3 materials: the Ward fit as a diffuse + rough-conductor blend.
 
 Mitsuba 3 has no Ward BSDF. The export is the exact sum of a Lambertian
-``ρd/π`` and the microfacet lobe :func:`~._microfacet.fit_microfacet` found
+``ρd/π`` and the microfacet lobe `fit_microfacet` found
 closest to the Ward lobe (``roughconductor``, ``material = "none"`` so that
 ``F = 1``, scaled by ``specular_reflectance = k_s``). Mitsuba's ``blendbsdf``
 mixes ``(1 − w) f₀ + w f₁``; with ``m = max ρd`` and ``w = k_s/(k_s + m)`` the
@@ -19,6 +19,8 @@ Colours are linear RGB with sRGB primaries, taken as they are by Mitsuba's
 """
 
 from __future__ import annotations
+
+from typing import Any
 
 import numpy as np
 
@@ -38,7 +40,7 @@ def _parts(rho_d, fit: MicrofacetFit, rho_s_colour) -> tuple[float, np.ndarray, 
     return w, rho_d / (1.0 - w), ks / w if w > 0 else ks
 
 
-def mitsuba_dict(rho_d, fit: MicrofacetFit, rho_s_colour=1.0) -> dict:
+def mitsuba_dict(rho_d, fit: MicrofacetFit, rho_s_colour: Any = 1.0) -> dict:
     """The material as a dict for ``mitsuba.load_dict`` (module docstring).
 
     Parameters
@@ -46,7 +48,7 @@ def mitsuba_dict(rho_d, fit: MicrofacetFit, rho_s_colour=1.0) -> dict:
     rho_d
         Diffuse reflectance RGB (linear, sRGB primaries).
     fit
-        A ``"conductor"`` :class:`~._microfacet.MicrofacetFit`.
+        A ``"conductor"`` `MicrofacetFit`.
     rho_s_colour
         ``ρs`` as fitted, grey or RGB: a coloured ``ρs`` tints ``k_s``.
     """
@@ -68,7 +70,7 @@ def mitsuba_dict(rho_d, fit: MicrofacetFit, rho_s_colour=1.0) -> dict:
     }
 
 
-def mitsuba_xml(name: str, rho_d, fit: MicrofacetFit, rho_s_colour=1.0, comment: str = "") -> str:
+def mitsuba_xml(name: str, rho_d, fit: MicrofacetFit, rho_s_colour: Any = 1.0, comment: str = "") -> str:
     """The same material as a Mitsuba 3 XML fragment (a ``<bsdf id=name>``, loadable on its own)."""
     d = mitsuba_dict(rho_d, fit, rho_s_colour)
     spec = d["specular"]

@@ -164,8 +164,8 @@ def write_capture_outputs(fit, out_dir, *, created: str) -> dict:
     ``texture.json`` (the parametric texture of section 4.2, when
     :mod:`wardjax.texture` can analyse the valid region), ``rho_d_plane.exr``,
     ``rho_d_plane.tif`` and ``rho_d_plane_mask.png`` (ρd rectified to the
-    sample plane, :func:`~._rectify.write_plane_texture`), ``material_mitsuba.xml``,
-    ``material_mitsuba.json`` and ``material.gltf`` (:func:`~._materials.material_exports`)
+    sample plane, `write_plane_texture`), ``material_mitsuba.xml``,
+    ``material_mitsuba.json`` and ``material.gltf`` (`material_exports`)
     and ``params.json``.
     ``params.json`` is the completion mark: a capture whose ``params.json``
     exists is finished.

@@ -2,9 +2,9 @@
 
 The camera sees the sample in perspective; a renderer wants the texture on
 the surface, in physical units. The rectified map samples the
-camera-perspective ρd (:func:`wardjax.extract_rho_d`) at the projections of
+camera-perspective ρd (`extract_rho_d`) at the projections of
 the centres of a regular grid on the sample plane (the capture's pinhole
-model, :func:`wardjax.geometry.project`), bilinearly:
+model, `project`), bilinearly:
 
 .. math::
 
@@ -21,6 +21,7 @@ camera's resolution where it is finest on average.
 from __future__ import annotations
 
 import json
+from pathlib import Path
 from typing import NamedTuple
 
 import numpy as np
@@ -34,7 +35,7 @@ MAX_SIDE = 8192  # the rectified grid's longest side (pixels); the pixel size gr
 
 
 class PlaneTexture(NamedTuple):
-    """ρd on a regular grid of the sample plane (:func:`rectify_rho_d`).
+    """ρd on a regular grid of the sample plane (`rectify_rho_d`).
 
     Attributes
     ----------
@@ -116,7 +117,7 @@ def rectify_rho_d(
     rho_d
         ``(H, W, 3)`` ρd in the camera's image (``camera.image_size``), NaN where unmeasured.
     camera
-        The capture's :class:`~wardjax.geometry.Camera`.
+        The capture's `Camera`.
     box
         ``(x_min, x_max, y_min, y_max)`` (mm) of the grid; default the
         bounding box of the measured pixels on the plane.
@@ -137,10 +138,14 @@ def rectify_rho_d(
         raise ValueError(f"rho_d must be (H, W, 3), got shape {rho_d.shape}")
     if rho_d.shape[:2] != (camera.height, camera.width):
         raise ValueError(
-            f"rho_d is {rho_d.shape[1]}×{rho_d.shape[0]} pixels but the camera's image is {camera.width}×{camera.height}"
+            f"rho_d is {rho_d.shape[1]}×{rho_d.shape[0]} pixels but the camera's image is "
+            f"{camera.width}×{camera.height}"
         )
-    auto_box, foot = _footprint_mm(camera, rho_d, band_rows) if box is None or pixel_mm is None else (None, 0.0)
-    x0, x1, y0, y1 = (float(v) for v in (box if box is not None else auto_box))  # pyright: ignore[reportGeneralTypeIssues]
+    if box is None or pixel_mm is None:
+        auto_box, foot = _footprint_mm(camera, rho_d, band_rows)
+    else:
+        auto_box, foot = np.asarray(box, np.float64), 0.0
+    x0, x1, y0, y1 = (float(v) for v in (box if box is not None else auto_box))
     if not (x1 > x0 and y1 > y0):
         raise ValueError(f"the grid's box (x {x0}…{x1}, y {y0}…{y1} mm) is empty")
     s = float(pixel_mm) if pixel_mm is not None else _round_sig(foot)
@@ -194,7 +199,7 @@ def write_exr(path, rgb: np.ndarray, *, pixel_mm: float, attributes: dict | None
 
 
 def read_exr(path) -> tuple[np.ndarray, dict]:
-    """An EXR written by :func:`write_exr`: ``(H, W, 3)`` float32 RGB and its header (``wardjax`` parsed)."""
+    """An EXR written by `write_exr`: ``(H, W, 3)`` float32 RGB and its header (``wardjax`` parsed)."""
     import OpenEXR
 
     with OpenEXR.File(str(path)) as f:
@@ -214,8 +219,6 @@ def write_plane_texture(out_dir, tex: PlaneTexture, *, fill, extra: dict | None 
     (pixels per centimetre) and the metadata as JSON in its description.
     """
     import tifffile
-
-    from pathlib import Path
 
     out = Path(out_dir)
     meta = tex.metadata() | (extra or {})
