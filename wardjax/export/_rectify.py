@@ -225,9 +225,9 @@ def write_plane_texture(out_dir, tex: PlaneTexture, *, fill, extra: dict | None 
     rgb = np.where(tex.mask[..., None], tex.rho_d, np.asarray(fill, np.float32)).astype(np.float32)
     write_exr(out / "rho_d_plane.exr", rgb, pixel_mm=tex.pixel_mm, attributes=meta)
     res = 10.0 / tex.pixel_mm
-    with atomic_path(out / "rho_d_plane.tif") as tmp:
+    with atomic_path(out / "rho_d_plane.tif") as fh:
         tifffile.imwrite(
-            tmp,
+            fh,
             rgb,
             photometric="rgb",
             resolution=(res, res),
