@@ -244,6 +244,40 @@ def _check_plane_files(out, doc, fill, tol):
     assert np.allclose(rgb[~mask], np.asarray(fill, np.float32))
     assert doc["files"]["mitsuba_xml"] == "material_mitsuba.xml" and doc["files"]["gltf"] == "material.gltf"
     assert doc["exports"]["source"]["normalization"] == GMD
+    # glTF: the base colour is the rectified map over the quad, ρd/(1 − F0) in 8-bit sRGB
+    gltf = json.loads((out / "material.gltf").read_text())
+    assert gltf["images"] == [{"uri": "material_basecolor.png"}]
+    assert gltf["materials"][0]["pbrMetallicRoughness"]["baseColorTexture"] == {"index": 0, "texCoord": 0}
+    codes = wj._files.read_image(out / "material_basecolor.png")
+    base = wj._files.decode_image(codes, "srgb", 8)
+    f0 = doc["exports"]["gltf"]["f0"]
+    np.testing.assert_allclose(base, np.clip(rgb / (1 - f0), 0, 1), atol=0.01)
+    pos = gltf["accessors"][0]
+    assert np.allclose(np.subtract(pos["max"], pos["min"]), [w * s / 1000, 0.0, h * s / 1000], rtol=1e-6)
+    _official_gltf_validator(out / "material.gltf")
+
+
+def _official_gltf_validator(path):
+    """Khronos' glTF-Validator (npm ``gltf-validator``), where Node.js can load it: no error, no warning."""
+    import shutil
+    import subprocess
+
+    node = shutil.which("node")
+    if (
+        node is None
+        or subprocess.run([node, "-e", "require.resolve('gltf-validator')"], capture_output=True).returncode
+    ):
+        return
+    js = (
+        "const v=require('gltf-validator'),fs=require('fs');"
+        "const ext=u=>Promise.resolve(new Uint8Array(fs.readFileSync(decodeURIComponent(u))));"
+        "const a=process.argv[1];"
+        "v.validateBytes(new Uint8Array(fs.readFileSync(a)),{uri:a,externalResourceFunction:ext})"
+        ".then(r=>console.log(JSON.stringify(r.issues)))"
+    )
+    run = subprocess.run([node, "-e", js, path.name], capture_output=True, text=True, cwd=path.parent, timeout=60)
+    issues = json.loads(run.stdout)
+    assert issues["numErrors"] == 0 and issues["numWarnings"] == 0, issues["messages"]
 
 
 def test_06_render_formats_are_written_beside_the_fit(simulated, tmp_path):

@@ -32,12 +32,12 @@ import numpy as np
 
 from ._microfacet import MicrofacetFit
 
-__all__ = ["GLTF_F0_DIELECTRIC", "gltf_document", "gltf_material_brdf"]
+__all__ = ["GLTF_F0_DIELECTRIC", "base_color_image", "gltf_document", "gltf_material_brdf"]
 
 GLTF_F0_DIELECTRIC = 0.04  # glTF's normal-incidence reflectance of its default dielectric (ior 1.5)
 
 
-def _material(name: str, rho_d, fit: MicrofacetFit, extras: dict) -> tuple[dict, list[str]]:
+def _material(name: str, rho_d, fit: MicrofacetFit, extras: dict, textured: bool) -> tuple[dict, list[str]]:
     if fit.target != "gltf":
         raise ValueError(f"glTF's export takes a 'gltf' microfacet fit, got {fit.target!r}")
     rho_d = np.broadcast_to(np.asarray(rho_d, np.float64), (3,))
@@ -58,9 +58,10 @@ def _material(name: str, rho_d, fit: MicrofacetFit, extras: dict) -> tuple[dict,
     mat = {
         "name": name,
         "pbrMetallicRoughness": {
-            "baseColorFactor": [*base.tolist(), 1.0],
+            "baseColorFactor": [1.0, 1.0, 1.0, 1.0] if textured else [*base.tolist(), 1.0],
             "metallicFactor": 0.0,
             "roughnessFactor": math.sqrt(a_b),
+            **({"baseColorTexture": {"index": 0, "texCoord": 0}} if textured else {}),
         },
         "doubleSided": False,
         "extensions": ext,
@@ -107,6 +108,7 @@ def gltf_document(
     tangent=(1.0, 0.0),
     generator: str = "wardjax",
     extras: dict | None = None,
+    base_color_uri: str | None = None,
 ) -> dict:
     """A self-contained glTF 2.0 document (JSON, buffer embedded) with the material on one quad.
 
@@ -124,11 +126,15 @@ def gltf_document(
         ``(tx, ty)``: the material tangent (the direction of ``α_x``) in the sample plane.
     extras
         Stored in the material's ``extras`` (the Ward fit and the conversion error).
+    base_color_uri
+        An sRGB image of ``ρd/(1 − F0)`` over the quad (`base_color_image`),
+        row 0 at the sample's largest ``y``: the base colour becomes this
+        texture (``baseColorFactor`` 1).
     """
-    mat, used = _material(name, rho_d, fit, extras or {})
+    mat, used = _material(name, rho_d, fit, extras or {}, base_color_uri is not None)
     data, views, accessors, attributes = _quad(*size_m, tangent)
     uri = "data:application/octet-stream;base64," + base64.b64encode(data).decode()
-    return {
+    doc = {
         "asset": {"version": "2.0", "generator": generator},
         "extensionsUsed": used,
         "scene": 0,
@@ -140,13 +146,26 @@ def gltf_document(
         "bufferViews": views,
         "accessors": accessors,
     }
+    if base_color_uri is not None:
+        clamp, linear = 33071, 9729  # CLAMP_TO_EDGE, LINEAR
+        doc["images"] = [{"uri": base_color_uri}]
+        doc["samplers"] = [{"magFilter": linear, "minFilter": linear, "wrapS": clamp, "wrapT": clamp}]
+        doc["textures"] = [{"source": 0, "sampler": 0}]
+    return doc
+
+
+def base_color_image(rho_d_plane, fit: MicrofacetFit) -> np.ndarray:
+    """The glTF base-colour texture of a rectified ρd: ``ρd/(1 − F0)`` as 8-bit sRGB ``(H, W, 3)``."""
+    from .._files import srgb8
+
+    return srgb8(np.clip(np.asarray(rho_d_plane, np.float64) / (1.0 - fit.k_s), 0.0, 1.0))
 
 
 def gltf_material_brdf(material: dict, wi, wo) -> np.ndarray:
     """``f_r (..., 3)`` (sr⁻¹) of a glTF material (metallic 0) for local directions (z = normal, x = mesh tangent).
 
     Read from the material's JSON as the specification defines it (module
-    docstring): base colour, roughness, ``KHR_materials_specular``,
+    docstring): base colour (its factor: a texture is not read), roughness, ``KHR_materials_specular``,
     ``KHR_materials_anisotropy``. Separable Smith–GGX masking. NumPy, float64.
     """
     pbr = material.get("pbrMetallicRoughness", {})

@@ -14,10 +14,11 @@ from __future__ import annotations
 
 import json
 
+import imagecodecs
 import numpy as np
 
 from ..ward import WardParams
-from ._gltf import gltf_document
+from ._gltf import base_color_image, gltf_document
 from ._microfacet import fit_microfacet
 from ._mitsuba import mitsuba_dict, mitsuba_xml
 
@@ -39,6 +40,7 @@ def material_exports(
     anisotropic: bool = False,
     size_m: tuple[float, float] = (0.1, 0.1),
     generator: str = "wardjax",
+    rho_d_plane=None,
 ) -> tuple[dict[str, bytes], dict]:
     """The files of `MATERIAL_FILES` (as bytes) and their ``params.json`` section.
 
@@ -56,6 +58,9 @@ def material_exports(
         Fit ``α_x`` and ``α_y`` apart (otherwise one α, the Ward lobe's geometric mean).
     size_m
         The glTF quad's size (metres).
+    rho_d_plane
+        ``(H, W, 3)`` ρd on the sample plane (finite everywhere): the glTF
+        material's base colour becomes a texture of it (``material_basecolor.png``).
 
     Returns
     -------
@@ -92,11 +97,18 @@ def material_exports(
         f"relative L2 difference of the lobes {best.relative_l2:.3g}, largest albedo difference {best.albedo_error:.3g}"
     )
     extras = {"wardjax": {"ward": source, "conversion": gl.metadata()}}
-    files = {
+    files = {}
+    uri = None
+    if rho_d_plane is not None:
+        uri = "material_basecolor.png"
+        files[uri] = imagecodecs.png_encode(np.ascontiguousarray(base_color_image(rho_d_plane, gl)), level=6)
+    files |= {
         MATERIAL_FILES["mitsuba_xml"]: mitsuba_xml(name, rho_d, best, p.rho_s, comment=comment).encode(),
         MATERIAL_FILES["mitsuba_dict"]: json.dumps(mitsuba_dict(rho_d, best, p.rho_s), indent=1).encode(),
         MATERIAL_FILES["gltf"]: json.dumps(
-            gltf_document(name, rho_d, gl, size_m=size_m, tangent=tangent, generator=generator, extras=extras)
+            gltf_document(
+                name, rho_d, gl, size_m=size_m, tangent=tangent, generator=generator, extras=extras, base_color_uri=uri
+            )
         ).encode(),
     }
     return files, section

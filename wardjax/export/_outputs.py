@@ -37,6 +37,7 @@ OUTPUT_FILES = (
     "material_mitsuba.xml",
     "material_mitsuba.json",
     "material.gltf",
+    "material_basecolor.png",
     "params.json",
 )
 
@@ -165,7 +166,7 @@ def write_capture_outputs(fit, out_dir, *, created: str) -> dict:
     :mod:`wardjax.texture` can analyse the valid region), ``rho_d_plane.exr``,
     ``rho_d_plane.tif`` and ``rho_d_plane_mask.png`` (ρd rectified to the
     sample plane, `write_plane_texture`), ``material_mitsuba.xml``,
-    ``material_mitsuba.json`` and ``material.gltf`` (`material_exports`)
+    ``material_mitsuba.json``, ``material.gltf`` and ``material_basecolor.png`` (`material_exports`)
     and ``params.json``.
     ``params.json`` is the completion mark: a capture whose ``params.json``
     exists is finished.
@@ -216,7 +217,7 @@ def write_capture_outputs(fit, out_dir, *, created: str) -> dict:
 
 def _write_render_formats(fit, out: Path, rho_d: np.ndarray, files: dict, extra: dict) -> None:
     """The rectified ρd and the Mitsuba / glTF materials; their metadata into ``extra``."""
-    size_m = (0.1, 0.1)
+    size_m, plane = (0.1, 0.1), None
     if getattr(fit, "camera", None) is not None:
         try:
             tex = rectify_rho_d(rho_d, fit.camera)
@@ -225,6 +226,7 @@ def _write_render_formats(fit, out: Path, rho_d: np.ndarray, files: dict, extra:
         else:
             fill = np.broadcast_to(np.asarray(fit.params.rho_d, np.float32), (3,))
             names = write_plane_texture(out, tex, fill=fill, extra={"unmeasured_fill": fill.tolist()})
+            plane = np.where(tex.mask[..., None], tex.rho_d, fill)
             files.update({f"texture_plane_{k}": v for k, v in names.items()})
             extra["rho_d_plane"] = tex.metadata()
             h, w = tex.mask.shape
@@ -238,10 +240,13 @@ def _write_render_formats(fit, out: Path, rho_d: np.ndarray, files: dict, extra:
         anisotropic=fit.model == "anisotropic",
         size_m=size_m,
         generator=f"wardjax {software_version()}",
+        rho_d_plane=plane,
     )
     for fname, data in blobs.items():
         write_bytes_atomic(out / fname, data)
     files.update(MATERIAL_FILES)
+    if plane is not None:
+        files["gltf_base_color"] = "material_basecolor.png"
     extra["exports"] = section
 
 
