@@ -1,4 +1,5 @@
-"""Materials out: the one ``params.json`` builder, Radiance materials, a capture's output folder."""
+"""Materials out: the one ``params.json`` builder, Radiance, Mitsuba 3 and glTF materials, ρd on the sample plane,
+a capture's output folder."""
 
 from ._outputs import OUTPUT_FILES as OUTPUT_FILES
 from ._outputs import scanline_figure_png as scanline_figure_png
@@ -14,6 +15,18 @@ from ._radiance import RADIANCE_PRIMARIES as RADIANCE_PRIMARIES
 from ._radiance import radiance_material as radiance_material
 from ._radiance import radiance_metal as radiance_metal
 from ._radiance import radiance_rgb as radiance_rgb
+from ._rectify import PlaneTexture as PlaneTexture
+from ._rectify import rectify_rho_d as rectify_rho_d
+from ._rectify import read_exr as read_exr
+from ._rectify import write_exr as write_exr
+from ._microfacet import MicrofacetFit as MicrofacetFit
+from ._microfacet import fit_microfacet as fit_microfacet
+from ._microfacet import microfacet_specular as microfacet_specular
+from ._mitsuba import mitsuba_dict as mitsuba_dict
+from ._mitsuba import mitsuba_xml as mitsuba_xml
+from ._gltf import gltf_document as gltf_document
+from ._gltf import gltf_material_brdf as gltf_material_brdf
+from ._materials import material_exports as material_exports
 
 __all__ = [
     "OUTPUT_FILES",
@@ -30,4 +43,16 @@ __all__ = [
     "radiance_material",
     "radiance_metal",
     "radiance_rgb",
+    "PlaneTexture",
+    "rectify_rho_d",
+    "read_exr",
+    "write_exr",
+    "MicrofacetFit",
+    "fit_microfacet",
+    "microfacet_specular",
+    "mitsuba_dict",
+    "mitsuba_xml",
+    "gltf_document",
+    "gltf_material_brdf",
+    "material_exports",
 ]

@@ -16,8 +16,10 @@ import numpy as np
 from .._files import jsonable, srgb8, write_bytes_atomic, write_image, write_json_atomic
 from ..texture import analyze_texture
 from ..ward import WardParams
+from ._materials import MATERIAL_FILES, material_exports
 from ._params import capture_fit_document, smartphone_document, software_version
-from ._radiance import fmt, radiance_material
+from ._radiance import RADIANCE_NORMALIZATION, fmt, radiance_material
+from ._rectify import rectify_rho_d, write_plane_texture
 
 __all__ = ["OUTPUT_FILES", "scanline_figure_png", "write_capture_outputs", "write_smartphone_outputs"]
 
@@ -29,6 +31,13 @@ OUTPUT_FILES = (
     "scanlines.csv",
     "residuals.npz",
     "texture.json",
+    "rho_d_plane.exr",
+    "rho_d_plane.tif",
+    "rho_d_plane_mask.png",
+    "material_mitsuba.xml",
+    "material_mitsuba.json",
+    "material.gltf",
+    "material_basecolor.png",
     "params.json",
 )
 
@@ -154,7 +163,11 @@ def write_capture_outputs(fit, out_dir, *, created: str) -> dict:
     ``residuals.npz`` (measured and fitted ``f_r`` over the image at the fit's
     binning: ``f_r``, ``model``, ``binning``, ``origin``; see ``CaptureFit.fit_map``),
     ``texture.json`` (the parametric texture of section 4.2, when
-    :mod:`wardjax.texture` can analyse the valid region) and ``params.json``.
+    :mod:`wardjax.texture` can analyse the valid region), ``rho_d_plane.exr``,
+    ``rho_d_plane.tif`` and ``rho_d_plane_mask.png`` (ρd rectified to the
+    sample plane, `write_plane_texture`), ``material_mitsuba.xml``,
+    ``material_mitsuba.json``, ``material.gltf`` and ``material_basecolor.png`` (`material_exports`)
+    and ``params.json``.
     ``params.json`` is the completion mark: a capture whose ``params.json``
     exists is finished.
 
@@ -196,9 +209,45 @@ def write_capture_outputs(fit, out_dir, *, created: str) -> dict:
         files["texture_model"] = "texture.json"
     except ValueError as e:  # e.g. the valid region is too small to analyse
         extra["texture_model_error"] = str(e).splitlines()[0]
+    _write_render_formats(fit, out, rho_d, files, extra)
     doc = jsonable(capture_fit_document(fit, created=created, files=files, extra=extra))
     write_json_atomic(out / "params.json", doc)
     return doc
+
+
+def _write_render_formats(fit, out: Path, rho_d: np.ndarray, files: dict, extra: dict) -> None:
+    """The rectified ρd and the Mitsuba / glTF materials; their metadata into ``extra``."""
+    size_m, plane = (0.1, 0.1), None
+    if getattr(fit, "camera", None) is not None:
+        try:
+            tex = rectify_rho_d(rho_d, fit.camera)
+        except ValueError as e:  # nothing measured on the plane
+            extra["rho_d_plane_error"] = str(e).splitlines()[0]
+        else:
+            fill = np.broadcast_to(np.asarray(fit.params.rho_d, np.float32), (3,))
+            names = write_plane_texture(out, tex, fill=fill, extra={"unmeasured_fill": fill.tolist()})
+            plane = np.where(tex.mask[..., None], tex.rho_d, fill)
+            files.update({f"texture_plane_{k}": v for k, v in names.items()})
+            extra["rho_d_plane"] = tex.metadata()
+            h, w = tex.mask.shape
+            size_m = (w * tex.pixel_mm / 1000.0, h * tex.pixel_mm / 1000.0)
+    rad = fit.radiance.params
+    blobs, section = material_exports(
+        rad,
+        normalization=RADIANCE_NORMALIZATION,
+        name=fit.name,
+        tangent=fit.tangent,
+        anisotropic=fit.model == "anisotropic",
+        size_m=size_m,
+        generator=f"wardjax {software_version()}",
+        rho_d_plane=plane,
+    )
+    for fname, data in blobs.items():
+        write_bytes_atomic(out / fname, data)
+    files.update(MATERIAL_FILES)
+    if plane is not None:
+        files["gltf_base_color"] = "material_basecolor.png"
+    extra["exports"] = section
 
 
 def write_smartphone_outputs(

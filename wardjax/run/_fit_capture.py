@@ -26,6 +26,7 @@ from ..capture import CAPTURE_FILE, MAX_CLIPPED_FRACTION, Capture, CaptureError
 from ..export import RADIANCE_NORMALIZATION
 from ..fit import CombinedFit, ScanlineFit, fit_scanlines, texture_field_covariance, with_texture_errors
 from ..fit._texture_field import lobe
+from ..geometry import Camera
 from ..reconstruct import (
     MIN_SCANLINE_SAMPLES,
     BandSetup,
@@ -84,6 +85,9 @@ class CaptureFit:
         covers image rows ``origin[0] + b·i …`` and columns ``origin[1] + b·j …``.
     tangent, checksums
         From the capture.
+    camera
+        The capture's :class:`~wardjax.geometry.Camera` (``rho_d`` is in its
+        image; :func:`wardjax.export.rectify_rho_d` maps it onto the sample plane).
     """
 
     name: str
@@ -104,6 +108,7 @@ class CaptureFit:
     fit_map: dict
     tangent: tuple[float, float]
     checksums: dict
+    camera: Camera | None = None
 
 
 def _joint_input(res: ScanlineFit) -> ScanlineFit:
@@ -233,6 +238,7 @@ def fit_capture(cap: Capture, *, max_fit_samples: int = 50_000, band_rows: int =
         fit_map=_fit_map(F, model_f, keep, bins),
         tangent=tangent,
         checksums=dict(cap.checksums),
+        camera=cap.rig.camera,
     )
 
 
