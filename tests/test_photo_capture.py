@@ -270,3 +270,63 @@ def test_10_vignetting_from_flat_field(tmp_path):
     assert cap.vignetting is not None
     m = cap.mask[:, :, 0] & plain.mask[:, :, 0]
     np.testing.assert_allclose(cap.f_r[:, :, 0][m], plain.f_r[:, :, 0][m], rtol=5e-3)
+
+
+def _board_view(cam_pos, scale=4):
+    """A photo of a printed 5 × 5 ArUco grid board (OpenCV draws it) through a pinhole at ``cam_pos`` (mm)."""
+    import cv2
+
+    from wardjax.geometry import Camera, back_project
+
+    board = cv2.aruco.GridBoard((5, 5), 20.0, 5.0, cv2.aruco.getPredefinedDictionary(cv2.aruco.DICT_4X4_50))
+    bw = 120
+    printed = board.generateImage((bw * scale, bw * scale), marginSize=0, borderBits=1).astype(np.float32)
+    cam = Camera(position=cam_pos, look_at=(0, 0, 0), focal_px=500.0, image_size=(480, 360), up=(0, 1, 0))
+    v, u = np.mgrid[0:360, 0:480].astype(float)
+    pts, _ = back_project(cam, u, v)
+    # the printed board's pixel (column, row) of each sample point: its centre at the origin, its rows down −y
+    xb = ((pts[..., 0] + bw / 2) * scale - 0.5).astype(np.float32)
+    yb = ((bw / 2 - pts[..., 1]) * scale - 0.5).astype(np.float32)
+    view = cv2.remap(printed, xb, yb, cv2.INTER_LINEAR, borderValue=255)
+    return np.repeat((0.8 * view / 255 + 0.08)[..., None], 3, -1), printed
+
+
+BOARD_TOML = """method = "multiview"
+encoding = "linear"
+[light]
+power = 1e5
+[board]
+markers = [5, 5]
+marker_size = 20.0
+separation = 5.0
+focal_px = 500.0
+pixels = [120, 120]
+"""
+
+
+def test_11_marker_board_pose_and_rectification(tmp_path):
+    positions = [(30.0, -40.0, 260.0), (-50.0, 10.0, 240.0)]
+    text = BOARD_TOML
+    for k, pos in enumerate(positions):
+        view, printed = _board_view(pos)
+        write_image(tmp_path / f"{k}.png", encode_image(view, "linear", 16))
+        text += f'[[photos]]\nfile = "{k}.png"\nlight_offset = [0.0, 0.0, 0.0]\n'
+    (tmp_path / "capture.toml").write_text(text)
+    cap = wj.load_capture(tmp_path)
+    assert cap.pixel_mm == pytest.approx(1.0) and cap.f_r.shape[:3] == (120, 120, 2)
+    for k, pos in enumerate(positions):
+        # the direction to the camera at the board's centre, from the pose solved on the markers
+        want = np.asarray(pos) / np.linalg.norm(pos)
+        got = 0.25 * (cap.wo[59, 59, k] + cap.wo[60, 60, k] + cap.wo[59, 60, k] + cap.wo[60, 59, k])
+        assert np.degrees(np.arccos(np.clip(got @ want / np.linalg.norm(got), -1, 1))) < 0.5
+        # the rectified photo is the printed board (box-averaged to 1 mm pixels), seen through the camera's blur
+        ref = 0.8 * printed.reshape(120, 4, 120, 4).mean(axis=(1, 3)) / 255 + 0.08
+        inner = (slice(4, -4), slice(4, -4))
+        assert np.corrcoef(cap.linear[:, :, k, 0][inner].ravel(), ref[inner].ravel())[0, 1] > 0.9
+
+
+def test_12_marker_board_not_found(tmp_path):
+    write_image(tmp_path / "0.png", encode_image(np.full((360, 480, 3), 0.4), "linear", 16))
+    (tmp_path / "capture.toml").write_text(BOARD_TOML + '[[photos]]\nfile = "0.png"\n')
+    with pytest.raises(CaptureError, match=r"^0.png: the marker board was not found \(0 DICT_4X4_50 markers"):
+        wj.load_capture(tmp_path)
