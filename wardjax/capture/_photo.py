@@ -270,6 +270,25 @@ def _estimates(points, cams, lights, linear, dark, clipped, step, exposures, pow
 
 # --------------------------------------------------------------------------- flash
 
+# More than this fraction of pixels darker in the photo than in its dark frame (on the photo's exposure scale):
+# the dark frame is not one of this photo (another exposure, other processing, the lamp on in both).
+_MAX_DARKER_FRACTION = 0.5
+
+
+def _check_dark(photo: _Shot, dark: _Shot | None, lin: np.ndarray, dk: np.ndarray, exposures) -> None:
+    if dark is None:
+        return
+    darker = float(np.mean(np.any(dk > lin, axis=-1)))
+    if darker > _MAX_DARKER_FRACTION:
+        raise CaptureError(
+            dark.name,
+            None,
+            f"on the exposure scale of {photo.name} (×{exposures[0] / exposures[1]:.3g}, from the exposures) it is "
+            f"brighter than {photo.name} in {100 * darker:.0f} % of the pixels: it is not a dark frame of that photo "
+            "(another exposure or processing); leave [dark] out or give each photo's real exposure",
+        )
+
+
 
 def _focal_px(cfg: FlashFile, shot: _Shot, folder: Path) -> float:
     h, w = shot.shape
@@ -375,6 +394,7 @@ def _load_flash(folder: Path, cfg: FlashFile) -> PhotoCapture:
     dk = np.zeros_like(lin)
     if dark is not None:
         dk = (dark.linear / gain)[crop][:, :, None] * (exposures[0] / exposures[1])
+    _check_dark(photo, dark, lin, dk, exposures)
     pts = np.where(hit[..., None], points, 0.0)[crop]
     clipped = (photo.clipped | ~hit)[crop][:, :, None]
     step = (photo.step / gain)[crop][:, :, None]
