@@ -225,7 +225,9 @@ def test_07_exif_read_and_contradiction(tmp_path):
 def test_08_exif_missing_names_the_field(tmp_path):
     folder, _ = _flash_folder(tmp_path)
     text = (folder / "capture.toml").read_text()
-    (folder / "capture.toml").write_text(text.replace("[dark]\nfile = \"dark.png\"\nexposure_time = 0.02\n", "[dark]\nfile = \"dark.png\"\n"))
+    (folder / "capture.toml").write_text(
+        text.replace('[dark]\nfile = "dark.png"\nexposure_time = 0.02\n', '[dark]\nfile = "dark.png"\n')
+    )
     with pytest.raises(CaptureError, match=r"capture.toml: dark.exposure_time: the exposure of dark.png is not known"):
         wj.load_capture(folder)
 

@@ -33,6 +33,7 @@ from pathlib import Path
 import numpy as np
 
 from ._errors import CAPTURE_FILE, CaptureError
+from ._photo import PhotoCapture
 
 __all__ = ["LAYOUTS", "MM_PER_UNIT", "import_capture"]
 
@@ -84,7 +85,9 @@ def _toml_vec(v) -> str:
     return "[" + ", ".join(f"{float(x):.9g}" for x in v) + "]"
 
 
-def import_capture(src, out, *, layout: str = "rectified", encoding: str = "srgb", units: str = "cm", name=None):
+def import_capture(
+    src, out, *, layout: str = "rectified", encoding: str = "srgb", units: str = "cm", name=None
+) -> PhotoCapture:
     """Write a ``method = "multiview"`` capture folder ``out`` from a dataset folder ``src`` and load it.
 
     Parameters
@@ -168,4 +171,6 @@ def import_capture(src, out, *, layout: str = "rectified", encoding: str = "srgb
     finally:
         if staging.exists():
             shutil.rmtree(staging)
-    return load_capture(out)
+    cap = load_capture(out)
+    assert isinstance(cap, PhotoCapture)  # capture.toml above says method = "multiview"
+    return cap

@@ -141,7 +141,7 @@ class _Shot:
         top = (1 << bits) - 1
         lut = decode_lut(encoding, bits).astype(np.float64)
         self.linear = lut[codes]
-        self.clipped = np.any(codes == top, axis=-1)
+        self.clipped: np.ndarray = np.asarray(np.any(codes == top, axis=-1))
         self.step = np.diff(lut, append=lut[-1] + (lut[-1] - lut[-2]))[codes]
         self.checksum = sha256(path)
         self.exposure = _exposure(path, shot, field)
@@ -289,7 +289,6 @@ def _check_dark(photo: _Shot, dark: _Shot | None, lin: np.ndarray, dk: np.ndarra
         )
 
 
-
 def _focal_px(cfg: FlashFile, shot: _Shot, folder: Path) -> float:
     h, w = shot.shape
     exif = read_exif(folder / shot.name)
@@ -315,7 +314,7 @@ def _focal_px(cfg: FlashFile, shot: _Shot, folder: Path) -> float:
 def _flash_camera(cfg: FlashFile, focal: float, shape: tuple[int, int]) -> Camera:
     h, w = shape
     c = cfg.camera
-    pos = (0.0, 0.0, float(c.distance)) if c.position is None else tuple(map(float, c.position))
+    pos = (0.0, 0.0, float(c.distance or 0.0)) if c.position is None else tuple(map(float, c.position))
     look = (0.0, 0.0, 0.0) if c.position is None else tuple(map(float, c.look_at))
     return Camera(position=pos, look_at=look, focal_px=focal, image_size=(w, h), up=tuple(map(float, c.up)))  # pyright: ignore[reportArgumentType]
 
@@ -395,8 +394,9 @@ def _load_flash(folder: Path, cfg: FlashFile) -> PhotoCapture:
     if dark is not None:
         dk = (dark.linear / gain)[crop][:, :, None] * (exposures[0] / exposures[1])
     _check_dark(photo, dark, lin, dk, exposures)
-    pts = np.where(hit[..., None], points, 0.0)[crop]
-    clipped = (photo.clipped | ~hit)[crop][:, :, None]
+    seen = np.asarray(hit, bool)  # the pixel's ray meets the sample plane
+    pts = np.where(seen[..., None], points, 0.0)[crop]
+    clipped = (photo.clipped | ~seen)[crop][:, :, None]
     step = (photo.step / gain)[crop][:, :, None]
     f_r, sigma, mask, wi, wo, scale, pts = _estimates(
         pts, np.asarray([cam.position]), lamp[None], lin, dk, clipped, step, exposures[:1], power, cfg, cfg.fit.bin

@@ -485,10 +485,10 @@ def import_cmd(src: Path, out_dir: Path, layout: str, encoding: str, units: str,
     if not src.is_dir():
         _fail(f"{src}: no such dataset folder")
     _check_out_dir(out_dir)
-    from ..capture import import_capture
+    from ..capture import PhotoCapture, import_capture
 
     try:
-        cap = import_capture(src, out_dir, layout=layout, encoding=encoding, units=units, name=name)
+        cap: PhotoCapture = import_capture(src, out_dir, layout=layout, encoding=encoding, units=units, name=name)
     except (ValueError, OSError) as e:
         _fail(str(e).splitlines()[0])
     h, w, k, _ = cap.f_r.shape

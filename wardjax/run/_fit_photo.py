@@ -136,7 +136,9 @@ def fit_photo_capture(
     )
     held = None
     if hold_out is not None:
-        pred_f = np.asarray(predict_pixels(res, cap.wi[:, :, hold_out].reshape(p, 1, 3), cap.wo[:, :, hold_out].reshape(p, 1, 3)))
+        pred_f = np.asarray(
+            predict_pixels(res, cap.wi[:, :, hold_out].reshape(p, 1, 3), cap.wo[:, :, hold_out].reshape(p, 1, 3))
+        )
         held = _held_out(cap, hold_out, pred_f.reshape(h, w, c))
     n = getattr(res, "normals", None)
     return PhotoFit(
@@ -195,7 +197,7 @@ def side_by_side(cap: PhotoCapture, held: HeldOut, gain: float = 4.0) -> np.ndar
 
 
 def write_photo_outputs(fit: PhotoFit, out_dir, *, created: str) -> dict:
-    """Write ``rho_d.tif``/``.png``, ``rho_d_sigma.tif``, ``maps.npz``, ``heldout.png``, ``report.md``, ``params.json`` (last)."""
+    """Write the ρd map and its σ (``.tif``), ``maps.npz``, ``heldout.png``, ``report.md``, then ``params.json``."""
     from ..export._params import params_document
 
     cap, res = fit.capture, fit.result
@@ -203,7 +205,9 @@ def write_photo_outputs(fit: PhotoFit, out_dir, *, created: str) -> dict:
     out.mkdir(parents=True, exist_ok=True)
     rho_s, ax, ay = _lobes(res, "rho_s"), _lobes(res, "alpha_x"), _lobes(res, "alpha_y")
     st = res.stderr  # pyright: ignore[reportAttributeAccessIssue]
-    srho_s, sax, say = (np.atleast_1d(np.asarray(getattr(st, n), float)).ravel().tolist() for n in ("rho_s", "alpha_x", "alpha_y"))
+    srho_s, sax, say = (
+        np.atleast_1d(np.asarray(getattr(st, n), float)).ravel().tolist() for n in ("rho_s", "alpha_x", "alpha_y")
+    )
     rho_mean = np.nanmean(fit.rho_d.reshape(-1, fit.rho_d.shape[-1]), axis=0)
     n_ok = np.sum(np.isfinite(fit.rho_d[..., 0]))
     rho_err = np.sqrt(np.nansum(fit.rho_d_stderr.reshape(-1, 3) ** 2, axis=0)) / max(n_ok, 1)
@@ -231,7 +235,14 @@ def write_photo_outputs(fit: PhotoFit, out_dir, *, created: str) -> dict:
         "chi2": chi2,
         "dof": dof,
         "lobe": getattr(res, "lobe", cap.config.fit.lobe),
-        "lobes": {"rho_s": rho_s, "alpha_x": ax, "alpha_y": ay, "rho_s_err": srho_s, "alpha_x_err": sax, "alpha_y_err": say},
+        "lobes": {
+            "rho_s": rho_s,
+            "alpha_x": ax,
+            "alpha_y": ay,
+            "rho_s_err": srho_s,
+            "alpha_x_err": sax,
+            "alpha_y_err": say,
+        },
         "photos": list(cap.photos),
         "photos_fitted": list(fit.photos_fitted),
         "held_out": None if fit.held_out is None else fit.held_out.summary(),
@@ -276,12 +287,19 @@ def report_text(fit: PhotoFit, params: WardParams, stderr: WardParams, doc: dict
         f"# {cap.name} ({cap.method}, {len(cap.photos)} photo{'s' if len(cap.photos) > 1 else ''})",
         "",
         f"Photos: {', '.join(cap.photos)}; fitted: {', '.join(cap.photos[i] for i in fit.photos_fitted)}.",
-        f"Pixel on the sample: {cap.pixel_mm:.3g} mm; light power P = {', '.join(f'{p:.4g}' for p in cap.light_power)}.",
+        f"Pixel on the sample: {cap.pixel_mm:.3g} mm; "
+        f"light power P = {', '.join(f'{p:.4g}' for p in cap.light_power)}.",
         "",
     ]
     lines += [f"- {n}" for n in cap.notes]
     rd = ", ".join(f"{v:.4f} ± {e:.4f}" for v, e in zip(np.asarray(params.rho_d), np.asarray(stderr.rho_d)))
-    lines += ["", f"Mean ρd (linear sRGB primaries, white E): {rd}", "", "| lobe | ρs | αx | αy |", "| --- | --- | --- | --- |"]
+    lines += [
+        "",
+        f"Mean ρd (linear sRGB primaries, white E): {rd}",
+        "",
+        "| lobe | ρs | αx | αy |",
+        "| --- | --- | --- | --- |",
+    ]
     lob = doc["lobes"]
     for i, (s, a, b) in enumerate(zip(lob["rho_s"], lob["alpha_x"], lob["alpha_y"])):
         es, ea, eb = lob["rho_s_err"][i], lob["alpha_x_err"][i], lob["alpha_y_err"][i]
