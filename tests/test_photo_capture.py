@@ -332,3 +332,33 @@ def test_12_marker_board_not_found(tmp_path):
     (tmp_path / "capture.toml").write_text(BOARD_TOML + '[[photos]]\nfile = "0.png"\n')
     with pytest.raises(CaptureError, match=r"^0.png: the marker board was not found \(0 DICT_4X4_50 markers"):
         wj.load_capture(tmp_path)
+
+
+def test_13_blocks_of_pixels_as_problems_round_trip(rng):
+    from wardjax.run._fit_photo import from_problems, to_problems
+
+    a = rng.normal(size=(6, 8, 3, 2))
+    p = to_problems(a, 2)
+    assert p.shape == (12, 12, 2)
+    # problem 0 is the top-left 2 × 2 block, its views pixel by pixel then photo by photo
+    np.testing.assert_array_equal(p[0], a[:2, :2].reshape(12, 2))
+    np.testing.assert_array_equal(p[1], a[:2, 2:4].reshape(12, 2))
+    np.testing.assert_array_equal(from_problems(p, 6, 8, 2), a)
+    np.testing.assert_array_equal(to_problems(a, 1), a.reshape(48, 3, 2))
+
+
+def test_14_cli_import_writes_the_capture_or_one_line(rectified):
+    from click.testing import CliRunner
+
+    from wardjax.run._cli import main
+
+    tmp, _ = rectified
+    r = CliRunner().invoke(main, ["import", str(tmp / "src"), "--out", str(tmp / "cap")])
+    assert r.exit_code == 0, r.output
+    assert "4 photos 64×48" in r.output and (tmp / "cap" / "capture.toml").is_file()
+    (tmp / "src" / "camera_pos.txt").write_text("0 0 30\n")
+    r = CliRunner().invoke(main, ["import", str(tmp / "src"), "--out", str(tmp / "cap2")])
+    assert r.exit_code == 2 and not (tmp / "cap2").exists()
+    assert r.output.strip().splitlines() == [
+        "error: camera_pos.txt: has 1 lines but " + str(tmp / "src") + " holds 4 images (one line each)"
+    ]
