@@ -268,6 +268,17 @@ def _estimates(points, cams, lights, linear, dark, clipped, step, exposures, pow
     return f_r, sigma, mask, wi, wo, scale, pts
 
 
+def _capture(folder, cfg, est, pixel_mm, names, linear, dark, exposures, power, vig, checksums, notes) -> PhotoCapture:
+    """The :class:`PhotoCapture` of :func:`_estimates`' output ``est`` and the photos' linear values (binned here)."""
+    f_r, sigma, mask, wi, wo, scale, pts = est
+    b = cfg.fit.bin
+    name = cfg.name or folder.resolve().name
+    return PhotoCapture(
+        folder, name, cfg.method, cfg, f_r, wi, wo, sigma, mask, pixel_mm, pts, names,
+        _bin(linear, b), _bin(dark, b), scale, np.asarray(exposures), power, vig, checksums, tuple(notes),
+    )  # fmt: skip
+
+
 # --------------------------------------------------------------------------- flash
 
 # More than this fraction of pixels darker in the photo than in its dark frame (on the photo's exposure scale):
@@ -398,33 +409,12 @@ def _load_flash(folder: Path, cfg: FlashFile) -> PhotoCapture:
     pts = np.where(seen[..., None], points, 0.0)[crop]
     clipped = (photo.clipped | ~seen)[crop][:, :, None]
     step = (photo.step / gain)[crop][:, :, None]
-    f_r, sigma, mask, wi, wo, scale, pts = _estimates(
+    est = _estimates(
         pts, np.asarray([cam.position]), lamp[None], lin, dk, clipped, step, exposures[:1], power, cfg, cfg.fit.bin
     )
     b = cfg.fit.bin
     pixel_mm = float(cam.position[2] if cfg.camera.distance is None else cfg.camera.distance) / focal * b
-    return PhotoCapture(
-        folder,
-        cfg.name or folder.resolve().name,
-        "flash",
-        cfg,
-        f_r,
-        wi,
-        wo,
-        sigma,
-        mask,
-        pixel_mm,
-        pts,
-        (photo.name,),
-        _bin(lin, b),
-        _bin(dk, b),
-        scale,
-        np.asarray(exposures[:1]),
-        power,
-        vig,
-        checksums,
-        tuple(notes),
-    )
+    return _capture(folder, cfg, est, pixel_mm, (photo.name,), lin, dk, exposures[:1], power, vig, checksums, notes)
 
 
 # --------------------------------------------------------------------------- multiview
@@ -460,32 +450,10 @@ def _load_multiview(folder: Path, cfg: MultiviewFile) -> PhotoCapture:
     points = np.stack(np.broadcast_arrays(x[None, :], y[:, None], np.zeros((h, w))), -1)
     power = np.asarray(cfg.light.power, np.float64)
     dark = np.zeros_like(linear)
-    f_r, sigma, mask, wi, wo, scale, pts = _estimates(
-        points, cams, lights, linear, dark, clipped, step, exposures, power, cfg, cfg.fit.bin
-    )
+    est = _estimates(points, cams, lights, linear, dark, clipped, step, exposures, power, cfg, cfg.fit.bin)
     b = cfg.fit.bin
-    return PhotoCapture(
-        folder,
-        cfg.name or folder.resolve().name,
-        "multiview",
-        cfg,
-        f_r,
-        wi,
-        wo,
-        sigma,
-        mask,
-        pixel * b,
-        pts,
-        tuple(s.name for s in shots),
-        _bin(linear, b),
-        _bin(dark, b),
-        scale,
-        np.asarray(exposures),
-        power,
-        None,
-        checksums,
-        tuple(notes),
-    )
+    names = tuple(s.name for s in shots)
+    return _capture(folder, cfg, est, pixel * b, names, linear, dark, exposures, power, None, checksums, notes)
 
 
 def load_photo_capture(folder: Path, cfg: FlashFile | MultiviewFile) -> PhotoCapture:
