@@ -78,6 +78,12 @@ if TYPE_CHECKING:  # the API as the type checker and the reader see it
     from .render import render_rig as render_rig
     from .render import slanted_edge_mtf as slanted_edge_mtf
     from . import effects as effects
+    from .fit import PixelFit as PixelFit
+    from .fit import fit_pixels as fit_pixels
+    from .fit import predict_pixels as predict_pixels
+    from .capture import PhotoCapture as PhotoCapture
+    from .capture import import_capture as import_capture
+    from .run import PhotoFit as PhotoFit
 
 # Each public name → the module defining it, imported on first use (PEP 562).
 _API = {
@@ -140,6 +146,12 @@ _API = {
     "render_rig": ".render",
     "slanted_edge_mtf": ".render",
     "effects": ".effects",
+    "PixelFit": ".fit",
+    "fit_pixels": ".fit",
+    "predict_pixels": ".fit",
+    "PhotoCapture": ".capture",
+    "import_capture": ".capture",
+    "PhotoFit": ".run",
 }
 __all__ = [
     "Status",
@@ -201,6 +213,12 @@ __all__ = [
     "render_rig",
     "slanted_edge_mtf",
     "effects",
+    "PixelFit",
+    "fit_pixels",
+    "predict_pixels",
+    "PhotoCapture",
+    "import_capture",
+    "PhotoFit",
 ]
 
 

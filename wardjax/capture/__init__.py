@@ -18,6 +18,15 @@ from ._setup import load_viewing as load_viewing
 from ._smartphone import SmartphoneCapture as SmartphoneCapture
 from ._smartphone import SmartphoneCaptureFile as SmartphoneCaptureFile
 from ._smartphone import grid_boxes as grid_boxes
+from ._exif import Exif as Exif
+from ._exif import read_exif as read_exif
+from ._exif import relative_exposure as relative_exposure
+from ._photo import PhotoCapture as PhotoCapture
+from ._photo_schema import FlashFile as FlashFile
+from ._photo_schema import MultiviewFile as MultiviewFile
+from ._vignetting import Vignetting as Vignetting
+from ._vignetting import fit_vignetting as fit_vignetting
+from ._import import import_capture as import_capture
 from ._rules import MAX_CLIPPED_FRACTION as MAX_CLIPPED_FRACTION
 from ._rules import RuleError as RuleError
 from ._rules import check_focal_px as check_focal_px
@@ -48,6 +57,15 @@ __all__ = [
     "SmartphoneCapture",
     "SmartphoneCaptureFile",
     "grid_boxes",
+    "Exif",
+    "read_exif",
+    "relative_exposure",
+    "PhotoCapture",
+    "FlashFile",
+    "MultiviewFile",
+    "Vignetting",
+    "fit_vignetting",
+    "import_capture",
     "MAX_CLIPPED_FRACTION",
     "RuleError",
     "check_focal_px",

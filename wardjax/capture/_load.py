@@ -12,6 +12,8 @@ from .._files import RAW_SUFFIXES, decode_lut, file_problem, sha256
 from ..geometry import Camera, Rig
 from ._errors import CAPTURE_FILE, CaptureError
 from ._images import CaptureImages, ImageSource, Window, open_image
+from ._photo import PhotoCapture, load_photo_capture
+from ._photo_schema import FlashFile, MultiviewFile
 from ._rules import RuleError, check_image_pair, check_lit_exposure
 from ._schema import CaptureFile, parse_capture_file, unit_direction
 from ._smartphone import SmartphoneCapture, check_relative, load_smartphone_capture
@@ -151,7 +153,7 @@ def _extremes(source: ImageSource) -> tuple[int, int]:
         raise CaptureError(source.name, None, f"cannot read the image ({_reason(e)})") from None
 
 
-def load_capture(path) -> Capture | SmartphoneCapture:
+def load_capture(path) -> Capture | SmartphoneCapture | PhotoCapture:
     """Load and validate a capture folder.
 
     Parameters
@@ -161,8 +163,9 @@ def load_capture(path) -> Capture | SmartphoneCapture:
 
     Returns
     -------
-    Capture or SmartphoneCapture
-        A :class:`SmartphoneCapture` when ``method = "smartphone"``.
+    Capture or SmartphoneCapture or PhotoCapture
+        A :class:`SmartphoneCapture` when ``method = "smartphone"``; a
+        :class:`PhotoCapture` when ``method = "flash"`` or ``"multiview"``.
 
     Raises
     ------
@@ -175,6 +178,8 @@ def load_capture(path) -> Capture | SmartphoneCapture:
     cfg = parse_capture_file(folder / CAPTURE_FILE)
     if cfg.method == "smartphone":
         return load_smartphone_capture(folder, cfg)
+    if isinstance(cfg, (FlashFile, MultiviewFile)):
+        return load_photo_capture(folder, cfg)
     checksums = {CAPTURE_FILE: sha256(folder / CAPTURE_FILE)}
     lit, checksums[cfg.images.lit] = _open_image(folder, cfg.images.lit, "images.lit", cfg)
     enc, bits = cfg.images.encoding, cfg.images.bit_depth

@@ -11,7 +11,8 @@ A capture folder holds what was measured and how::
 z = 0, stripline along y, probe at x > 0, standard at x < 0, lamp and camera
 in the plane x = 0)::
 
-    method = "scanline"            # "scanline" (image-based paper); "smartphone": see wardjax.capture._smartphone
+    method = "scanline"            # "scanline" (image-based paper); "smartphone": see wardjax.capture._smartphone;
+                                   # "flash", "multiview" (photographs): see wardjax.capture._photo_schema
     name = "desk"                  # optional; default the folder name
     rho_standard = 0.99            # reflectance of the standard, or [r, g, b]
 
@@ -65,6 +66,7 @@ from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, Strict
 from .._files import file_problem
 from ._errors import CAPTURE_FILE, CaptureError, pydantic_error
 from ._rules import LIMITS, RuleError, check_count, check_focal_px, check_position
+from ._photo_schema import FlashFile, MultiviewFile, parse_photo_file
 from ._smartphone import SmartphoneCaptureFile, parse_smartphone_file
 
 __all__ = ["CaptureFile", "parse_capture_file", "unit_direction"]
@@ -224,7 +226,7 @@ def _check_physics(cfg: CaptureFile) -> None:
         raise CaptureError(f, "material.tangent", f"must be a non-zero direction, got {list(cfg.material.tangent)}")
 
 
-def parse_capture_file(path: Path) -> CaptureFile | SmartphoneCaptureFile:
+def parse_capture_file(path: Path) -> CaptureFile | SmartphoneCaptureFile | FlashFile | MultiviewFile:
     """Read and validate ``capture.toml`` (raises :class:`CaptureError`)."""
     f = CAPTURE_FILE
     if path.is_dir():
@@ -247,6 +249,9 @@ def parse_capture_file(path: Path) -> CaptureFile | SmartphoneCaptureFile:
     if method == "smartphone":
         # The smartphone method's sections are in ._smartphone.
         return parse_smartphone_file(raw, f)
+    if method in ("flash", "multiview"):
+        # Photograph captures' sections are in ._photo_schema.
+        return parse_photo_file(raw, f)
     try:
         cfg = CaptureFile.model_validate(raw)
     except pydantic.ValidationError as e:

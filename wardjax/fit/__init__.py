@@ -1,6 +1,10 @@
-"""Fitting Ward to scanlines: per-scanline fits, the joint refit, texture-field errors."""
+"""Fitting Ward: scanlines (per-scanline fits, the joint refit, texture-field errors) and the pixels of a few photos."""
 
 from ._joint import CombinedFit as CombinedFit
+from ._pixels import PixelFit as PixelFit
+from ._pixels import PixelParams as PixelParams
+from ._pixels import fit_pixels as fit_pixels
+from ._pixels import predict_pixels as predict_pixels
 from ._scanline import ScanlineFit as ScanlineFit
 from ._scanline import fit_scanlines as fit_scanlines
 from ._texture_field import TextureErrors as TextureErrors
@@ -14,4 +18,8 @@ __all__ = [
     "TextureErrors",
     "texture_field_covariance",
     "with_texture_errors",
+    "PixelFit",
+    "PixelParams",
+    "fit_pixels",
+    "predict_pixels",
 ]

@@ -27,6 +27,12 @@ from ._radiance_scenes import radiance_render_phone as radiance_render_phone
 from ._radiance_scenes import radiance_render_sphere as radiance_render_sphere
 from ._radiance_scenes import sphere_radiance_scene as sphere_radiance_scene
 from ._spectra import GratingSpectrum as GratingSpectrum
+from ._flash_views import FlashViews as FlashViews
+from ._flash_views import flash_views as flash_views
+from ._flash_views import flash_views_scene as flash_views_scene
+from ._flash_views import radiance_render_flash_views as radiance_render_flash_views
+from ._flash_views import rectified_geometry as rectified_geometry
+from ._flash_views import render_flash_views as render_flash_views
 from ._spectra import grating_spectrum as grating_spectrum
 
 __all__ = [
@@ -57,4 +63,10 @@ __all__ = [
     "sphere_radiance_scene",
     "GratingSpectrum",
     "grating_spectrum",
+    "FlashViews",
+    "flash_views",
+    "flash_views_scene",
+    "radiance_render_flash_views",
+    "rectified_geometry",
+    "render_flash_views",
 ]

@@ -21,6 +21,10 @@ if TYPE_CHECKING:  # the API as the type checker and the reader see it
     from ._distributed import open_scheduler as open_scheduler
     from ._fit_capture import CaptureFit as CaptureFit
     from ._fit_capture import fit_capture as fit_capture
+    from ._fit_photo import HeldOut as HeldOut
+    from ._fit_photo import PhotoFit as PhotoFit
+    from ._fit_photo import fit_photo_capture as fit_photo_capture
+    from ._fit_photo import write_photo_outputs as write_photo_outputs
     from ._smartphone import fit_smartphone_capture as fit_smartphone_capture
 
 # Each public name → the module defining it, imported on first use (PEP 562).
@@ -38,6 +42,10 @@ _API = {
     "open_scheduler": "._distributed",
     "CaptureFit": "._fit_capture",
     "fit_capture": "._fit_capture",
+    "HeldOut": "._fit_photo",
+    "PhotoFit": "._fit_photo",
+    "fit_photo_capture": "._fit_photo",
+    "write_photo_outputs": "._fit_photo",
     "fit_smartphone_capture": "._smartphone",
 }
 __all__ = [
@@ -54,6 +62,10 @@ __all__ = [
     "open_scheduler",
     "CaptureFit",
     "fit_capture",
+    "HeldOut",
+    "PhotoFit",
+    "fit_photo_capture",
+    "write_photo_outputs",
     "fit_smartphone_capture",
 ]
 

@@ -37,6 +37,7 @@ from .._files import commit_folder, remove_temporaries, sha256, write_bytes_atom
 from ..capture import CAPTURE_FILE, CaptureError, load_capture
 from ..export import write_capture_outputs
 from ._fit_capture import fit_capture
+from ._fit_photo import fit_photo_outputs
 from ._smartphone import fit_smartphone_capture
 
 __all__ = ["BatchItem", "check_outputs_apart", "find_captures", "fit_one", "run_batch", "SUMMARY_COLUMNS"]
@@ -72,7 +73,12 @@ def _fit_scanline(cap, out_dir: Path, created: str) -> dict:
 
 
 # Fitters by capture method (``method`` in capture.toml): each fits a loaded capture and writes its outputs.
-FITTERS: dict[str, Callable] = {"scanline": _fit_scanline, "smartphone": fit_smartphone_capture}
+FITTERS: dict[str, Callable] = {
+    "scanline": _fit_scanline,
+    "smartphone": fit_smartphone_capture,
+    "flash": fit_photo_outputs,
+    "multiview": fit_photo_outputs,
+}
 
 
 @dataclasses.dataclass(frozen=True)
@@ -286,7 +292,9 @@ def _one_line(e: BaseException, log: Path | None = None) -> str:
 _STAGING = re.compile(r"(\.[0-9a-f]{8})?\.partial")
 
 
-def fit_one(source: Path, name: str, out: Path, created: str, force: bool = False) -> tuple[BatchItem, str | None]:
+def fit_one(
+    source: Path, name: str, out: Path, created: str, force: bool = False, hold_out: int | None = None
+) -> tuple[BatchItem, str | None]:
     """Fit one capture of a batch into ``out/<name>/``: the unit of work, locally or as a cluster task.
 
     Skips a capture already finished with the current inputs (unless
@@ -317,7 +325,9 @@ def fit_one(source: Path, name: str, out: Path, created: str, force: bool = Fals
         fitter = FITTERS.get(cap.method)
         if fitter is None:
             raise CaptureError(CAPTURE_FILE, "method", f"no fitter for method {cap.method!r}")
-        doc = fitter(cap, staging, created=created)
+        if hold_out is not None and cap.method not in ("flash", "multiview"):
+            raise CaptureError(CAPTURE_FILE, "method", f"--hold-out needs a photograph capture, got {cap.method!r}")
+        doc = fitter(cap, staging, created=created, **({} if hold_out is None else {"hold_out": hold_out}))
         commit_folder(staging, out_dir, last="params.json")
         return BatchItem(source, name, "ok", params=doc), None
     except Exception as e:  # a bad capture must not sink the batch, nor leave half its outputs
@@ -337,6 +347,7 @@ def run_batch(
     progress: Callable[[int, int, BatchItem], None] | None = None,
     on_start: Callable[[int, int, str], None] | None = None,
     scheduler=None,
+    hold_out: int | None = None,
 ) -> list[BatchItem]:
     """Fit every capture under ``paths`` into ``out``; write ``out/summary.csv``.
 
@@ -361,6 +372,8 @@ def run_batch(
         ``distributed.Client``, a scheduler address (``"tcp://host:8786"``) or
         ``"local[:N]"`` (a ``LocalCluster`` of ``N`` worker processes); see
         :func:`wardjax.run.open_scheduler`. The outputs are the same files.
+    hold_out
+        Photograph captures: leave photo ``hold_out`` out of each fit and predict it.
 
     Returns
     -------
@@ -375,7 +388,7 @@ def run_batch(
     # Microseconds: ``created`` also tells this batch's commits from an earlier batch's (a retried task
     # skips what this batch already wrote, a rerun skips what an earlier one did), even a second apart.
     created = datetime.datetime.now(datetime.UTC).isoformat(timespec="microseconds").replace("+00:00", "Z")
-    jobs = [(src, name, out, created, force) for src, name in zip(captures, names)]
+    jobs = [(src, name, out, created, force, hold_out) for src, name in zip(captures, names)]
     done: dict[int, BatchItem] = {}
     log: list[str] = []
 

@@ -240,7 +240,7 @@ def gratings(display_name: str, viewing_name: str, out_dir: Path, orientation: s
 # --------------------------------------------------------------------------- fitting and simulating captures
 
 
-def _fit_with_progress(paths, out_dir: Path, force: bool, quiet: bool, client, err: Console) -> list:
+def _fit_with_progress(paths, out_dir: Path, force: bool, quiet: bool, client, err: Console, hold_out=None) -> list:
     """:func:`~wardjax.run_batch` under a rich progress bar; each failed capture one line on ``err``."""
     from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
@@ -267,7 +267,9 @@ def _fit_with_progress(paths, out_dir: Path, force: bool, quiet: bool, client, e
                 text = item.error if named else f"{item.name}: {item.error}"
                 err.print(f"[bold red]error:[/] {escape(text)}", highlight=False, soft_wrap=True)
 
-        return run_batch(paths, out_dir, force=force, progress=progress, on_start=on_start, scheduler=client)
+        return run_batch(
+            paths, out_dir, force=force, progress=progress, on_start=on_start, scheduler=client, hold_out=hold_out
+        )
 
 
 @main.command("fit")
@@ -288,9 +290,23 @@ def _fit_with_progress(paths, out_dir: Path, force: bool, quiet: bool, client, e
     help="Fit each capture as a task on a dask.distributed cluster: a scheduler's address, or local:N to start "
     "N worker processes here [default: one capture after another in this process].",
 )
+@click.option(
+    "--hold-out",
+    type=click.IntRange(min=0),
+    default=None,
+    metavar="K",
+    help="Photograph captures: fit all photos but photo K (0-based), predict it and write heldout.png "
+    "(photo | prediction | residual) with its RMSE (linear, display) and PSNR.",
+)
 @click.pass_context
 def fit_cmd(
-    ctx: click.Context, paths: tuple[Path, ...], out_dir: Path, force: bool, quiet: bool, scheduler: str | None
+    ctx: click.Context,
+    paths: tuple[Path, ...],
+    out_dir: Path,
+    force: bool,
+    quiet: bool,
+    scheduler: str | None,
+    hold_out: int | None,
 ) -> None:
     """Fit capture folders (or folders of them): params.json, ρd texture, scanline plot, material.rad.
 
@@ -327,7 +343,7 @@ def fit_cmd(
                 return _fail(str(exc))
             if not quiet:
                 err.print(f"dask dashboard: {client.dashboard_link}", highlight=False, soft_wrap=True)
-        items = _fit_with_progress(paths, out_dir, force, quiet, client, err)
+        items = _fit_with_progress(paths, out_dir, force, quiet, client, err, hold_out)
     if not quiet:
         from rich.table import Table
 
@@ -358,6 +374,13 @@ def fit_cmd(
                 console.print(f"note: {it.name}: {note}", highlight=False, soft_wrap=True)
             if note := color_note(it.params):
                 console.print(f"colour: {it.name}: {note}", highlight=False, soft_wrap=True)
+            if it.params and (ho := it.params["fit"].get("held_out")):
+                console.print(
+                    f"{it.name}: held-out photo {ho['photo']} ({ho['file']}): RMSE {ho['rmse_linear']:.4g} linear "
+                    f"(noise {ho['rmse_noise']:.3g}), {ho['rmse_display']:.4g} display, PSNR {ho['psnr_db']:.2f} dB",
+                    highlight=False,
+                    soft_wrap=True,
+                )
     if any(it.status == "error" for it in items):
         sys.exit(2)
 
@@ -454,6 +477,57 @@ def simulate_cmd(
 
 
 # --------------------------------------------------------------------------- end capture pipeline
+
+
+# --------------------------------------------------------------------------- import (photograph datasets)
+
+
+@main.command("import")
+@click.argument("src", type=click.Path(path_type=Path))
+@click.option(
+    "--out",
+    "out_dir",
+    type=click.Path(file_okay=False, path_type=Path),
+    required=True,
+    help="The capture folder to write (new or empty).",
+)
+@click.option("--layout", type=click.Choice(["rectified"]), default="rectified", show_default=True)
+@click.option(
+    "--encoding",
+    type=click.Choice(["srgb", "gamma2.2", "linear"]),
+    default="srgb",
+    show_default=True,
+    help="How the images encode light (MaterialGAN's captures: gamma2.2).",
+)
+@click.option(
+    "--units",
+    type=click.Choice(["cm", "mm", "m"]),
+    default="cm",
+    show_default=True,
+    help="Length unit of camera_pos.txt, light_pos.txt, image_size.txt (and of light_power.txt's distances).",
+)
+@click.option("--name", default=None, help="The capture's name [default: the --out folder's name].")
+def import_cmd(src: Path, out_dir: Path, layout: str, encoding: str, units: str, name: str | None) -> None:
+    """Write a multiview capture folder from a dataset in the rectified layout (see docs/photographs.md)."""
+    if not src.is_dir():
+        _fail(f"{src}: no such dataset folder")
+    _check_out_dir(out_dir)
+    from ..capture import PhotoCapture, import_capture
+
+    try:
+        cap: PhotoCapture = import_capture(src, out_dir, layout=layout, encoding=encoding, units=units, name=name)
+    except (ValueError, OSError) as e:
+        _fail(str(e).splitlines()[0])
+    h, w, k, _ = cap.f_r.shape
+    console.print(
+        f"wrote capture [bold]{escape(cap.name)}[/]: {k} photos {w}×{h}, {cap.pixel_mm:.3g} mm a pixel, "
+        f"{int(cap.mask.any(axis=-1).sum())} pixels observed, to {escape(str(out_dir))}/",
+        highlight=False,
+        soft_wrap=True,
+    )
+
+
+# --------------------------------------------------------------------------- end import
 
 
 # --------------------------------------------------------------------------- texture

@@ -130,8 +130,13 @@ def _joint_input(res: ScanlineFit) -> ScanlineFit:
     return dataclasses.replace(res, status=st)
 
 
-def fit_capture(cap: Capture, *, max_fit_samples: int = 50_000, band_rows: int = 512) -> CaptureFit:
+def fit_capture(cap, *, max_fit_samples: int = 50_000, band_rows: int = 512, hold_out: int | None = None):
     """Fit a loaded capture: material, uncertainties, texture and diagnostics.
+
+    A photograph capture (``method = "flash"`` or ``"multiview"``) is fitted
+    by :func:`wardjax.run.fit_photo_capture` (per-pixel ρd and lobes, one
+    batched call), which returns a :class:`~wardjax.run.PhotoFit`; with
+    ``hold_out = k`` photo ``k`` is left out of the fit and predicted.
 
     Parameters
     ----------
@@ -144,6 +149,8 @@ def fit_capture(cap: Capture, *, max_fit_samples: int = 50_000, band_rows: int =
         ρs, αx, αy equal to 10⁻⁴ of their σ (the lobe spans hundreds of pixels).
     band_rows
         Rows processed at a time (bounds the working memory of large images).
+    hold_out
+        Photograph captures only: the photo to leave out and predict.
 
     Returns
     -------
@@ -156,6 +163,12 @@ def fit_capture(cap: Capture, *, max_fit_samples: int = 50_000, band_rows: int =
         below the noise floor or without a mirror point on the standard), or
         no scanline carries a specular signal.
     """
+    if cap.method in ("flash", "multiview"):
+        from ._fit_photo import fit_photo_capture
+
+        return fit_photo_capture(cap, hold_out=hold_out)
+    if hold_out is not None:
+        raise CaptureError(CAPTURE_FILE, "method", f"hold_out needs a photograph capture, got {cap.method!r}")
     if cap.method != "scanline":  # the smartphone method dispatches in wardjax.run
         raise CaptureError(CAPTURE_FILE, "method", f"fit_capture fits method = 'scanline', got {cap.method!r}")
     cfg = cap.config

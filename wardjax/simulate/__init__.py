@@ -6,6 +6,11 @@ from ._capture import SensorNoise as SensorNoise
 from ._capture import simulate_capture as simulate_capture
 from ._capture import write_capture_toml as write_capture_toml
 from ._forward import capture_radiance as capture_radiance
+from ._flash_views import FlashNoise as FlashNoise
+from ._flash_views import flash_noise_sigma as flash_noise_sigma
+from ._flash_views import flash_views_data as flash_views_data
+from ._flash_views import FlashViewsData as FlashViewsData
+from ._flash_views import simulate_flash_views as simulate_flash_views
 from ._forward import TABLE_REFLECTANCE as TABLE_REFLECTANCE
 from ._forward import ward_values as ward_values
 from ._procedural import plane_texture as plane_texture
@@ -38,4 +43,9 @@ __all__ = [
     "ScanlineRig",
     "simulate_scanlines",
     "x_offset_for_slope",
+    "FlashNoise",
+    "flash_noise_sigma",
+    "flash_views_data",
+    "FlashViewsData",
+    "simulate_flash_views",
 ]
