@@ -33,7 +33,7 @@ def test_null_data_add_nothing(reports):
     case, rep = reports[None]
     assert rep.n_obs == 8 * 128 * 3
     assert rep.found == []
-    assert rep.explained and "nothing missing" in rep.verdict()
+    assert rep.explained and "nothing needed" in rep.verdict()
     assert 0.9 < rep.gap[0] < 1.1
     # the symmetric effects are listed as undetectable, not tested
     assert {n for n, _ in rep.not_detectable} == {"symmetric_falloff", "directional_emission"}
