@@ -15,8 +15,8 @@ The estimate
     irradiance (smooth) and noise: the relative noise variance per pixel,
     ``c = median((Δ²v / √6)² / v²) / 0.4549`` per channel (``Δ²`` the second
     difference along rows and columns of the raw, unsmoothed lit − dark
-    crop; the median of ``χ²₁`` is 0.4549, and the median ignores the crop's
-    edges off the standard). What reaches a bin of ``b × b`` probe pixels is
+    crop, over triples within 20 % of their centre, so none straddles the
+    standard's edge; the median of ``χ²₁`` is 0.4549). What reaches a bin of ``b × b`` probe pixels is
     ``c Σ K_b²``, ``K_b`` the smoothing kernel averaged over the bin (the
     mirror mapping taken as one standard pixel per probe pixel), added to the
     noise variance as ``c Σ K_b² f²``.
@@ -55,7 +55,9 @@ def _relative_noise(v: np.ndarray) -> np.ndarray:
             x0, x1, x2 = (np.take(x, range(i, x.shape[a] - 2 + i), axis=a) for i in range(3))
             with np.errstate(invalid="ignore", divide="ignore"):
                 r = (x0 - 2 * x1 + x2) / (np.sqrt(6.0) * x1)
-            r2.append((r * r)[np.isfinite(r) & (x1 > 0)])
+            # triples on the standard only: across its edge (the table, the probe) the values jump
+            on = (x1 > 0) & (np.abs(x0 - x1) < 0.2 * x1) & (np.abs(x2 - x1) < 0.2 * x1)
+            r2.append((r * r)[np.isfinite(r) & on])
         vals = np.concatenate(r2)
         out[c] = float(np.median(vals)) / _CHI2_1_MEDIAN if vals.size >= 16 else 0.0
     return out
