@@ -316,3 +316,36 @@ def test_whitened_residuals_take_one_whitening_where_nothing_is_measured(small):
     assert np.max(np.abs(ref)) > 1.0  # the whitening matters: not a trivially small residual
     for r in (r_direct, r_general, r_static):
         np.testing.assert_allclose(r, ref, rtol=1e-8, atol=1e-8 * np.max(np.abs(ref)))
+
+
+def test_smoothing_factor_is_the_kernels_energy():
+    """A Gaussian of σ pixels keeps ``1/(4πσ²)`` of a white noise's variance (its kernel's energy); a ``b × b`` mean
+    of the result keeps about ``1/b²`` of that where ``b`` ≪ σ, and ``1/b²`` of the unsmoothed noise at σ → 0."""
+    from wardjax.effects._standard_noise import smoothing_factor
+
+    for s in (2.0, 3.0):
+        np.testing.assert_allclose(smoothing_factor(s, 1), 1 / (4 * np.pi * s * s), rtol=0.02)
+    assert smoothing_factor(3.0, 2) == pytest.approx(smoothing_factor(3.0, 1), rel=0.1)
+    np.testing.assert_allclose(smoothing_factor(1e-3, 3), 1 / 9, rtol=1e-6)
+
+
+def test_capture_noise_counts_the_smoothed_standard(tmp_path, monkeypatch):
+    """σ of a capture's BRDF values against the noise itself: the same scene with and without sensor noise
+    (16-bit 320 × 240, binned 2 × 2), their difference is the noise the reconstruction carries. With the smoothed
+    standard's share ``(Δf/σ)²`` averages 1; the second differences alone miss it (> 1.05)."""
+    from wardjax.effects import _capture
+    from wardjax.simulate import SensorNoise
+
+    p = wj.WardParams(rho_d=(0.6, 0.5, 0.4), rho_s=0.04, alpha_x=0.12, alpha_y=0.12)
+    kw = {"seed": 3, "texture": "none", "bit_depth": 16, "image_size": (320, 240)}
+    noisy = wj.simulate_capture(p, tmp_path / "noisy", **kw)
+    clean = wj.simulate_capture(p, tmp_path / "clean", noise=SensorNoise(0.0, 0.0), **kw)
+
+    def ratio():
+        a, b = _capture.capture_data(noisy, max_samples=6000), _capture.capture_data(clean, max_samples=6000)
+        m = np.asarray(a.mask) & np.asarray(b.mask)
+        return float(np.mean(((np.asarray(a.y) - np.asarray(b.y))[m] / np.asarray(a.sigma)[m]) ** 2))
+
+    assert 0.94 < ratio() < 1.03
+    monkeypatch.setattr(_capture, "standard_noise_share", lambda cap, b: np.zeros(3))
+    assert ratio() > 1.05

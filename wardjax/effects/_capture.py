@@ -27,6 +27,9 @@ Noise
     least squares, per channel. With ``σ²`` in ``ȳ`` alone the whitened
     residuals of a clean 160 × 120 capture ran from 0.5 near the lamp to 2.2
     far from it; with ``w`` 0.95–1.3.
+    The standard's own noise, smoothed (``fit.smooth_standard_px``), is
+    correlated along the scanline and escapes second differences; it is
+    measured on the standard and added (:mod:`~wardjax.effects._standard_noise`).
     What remains biased upwards: the highlight's curvature where it is sharp
     on the pixel grid, and fine texture of the probe, which this estimate
     counts as noise.
@@ -39,6 +42,7 @@ import numpy as np
 from ..capture import CAPTURE_FILE, Capture, CaptureError
 from ._models import ScanlineData, inv_irradiance, scanline_data
 from ._noise import noise_columns
+from ._standard_noise import standard_noise_share
 
 __all__ = ["capture_data"]
 
@@ -126,6 +130,9 @@ def capture_data(cap: Capture, *, max_samples: int = 20_000, band_rows: int = 51
     F, cens = F[keep], cens[keep]
     wi, pts = bins.wi[keep], bins.points[keep]
     sigma = _noise_model(F, exact=~cens, w=inv_irradiance(pts, rig.lamp, wi))
+    # the smoothed standard's noise, which second differences do not see (wardjax.effects._standard_noise)
+    share = standard_noise_share(cap, bins.b)
+    sigma = np.sqrt(sigma * sigma + share * np.where(np.isfinite(F), F, 0.0) ** 2)
     return scanline_data(
         F,
         wi,

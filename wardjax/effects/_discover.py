@@ -34,9 +34,15 @@ Evidence: why BIC *and* a boundary-corrected likelihood ratio
     step. Amplitudes that are physical only on one side of their absent
     value (a second lobe's weight, a Fresnel κ) are fitted unconstrained; a
     fit on the unphysical side counts as no evidence, and the LR reference is
-    the boundary mixture ``½χ²_{k−1} + ½χ²_k`` (Self & Liang 1987). Grouped
-    cross-validation was not chosen: it needs a refit per fold and candidate,
-    and its noise on small data (16 points) is larger than the effects.
+    the boundary mixture ``½χ²_{k−1} + ½χ²_k`` (Self & Liang 1987). Both
+    price the effect against the noise model; where that model is off
+    (correlated noise, misread texture) every Δχ² is inflated alike. So the
+    winner must also predict data it was not fitted to: refitted on one half
+    of the scanlines it must lower χ² on the other (two folds; its held-out
+    gain at least a quarter of its Δχ², :mod:`wardjax.effects._holdout`) —
+    only the winner, once per step, and only on scanline data with 16
+    scanlines or more (on 16 threshold points the folds' noise exceeds the
+    effects).
 
 Guard against confident wrong names
     A library effect that is strongly supported but explains less than
@@ -68,17 +74,17 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 import numpy as np
-from scipy.special import ndtr  # the normal tail: scipy.stats's own kernel, ~1 s less import
 
 from ._effect import Effect, Param
 from ._evidence import _NOISE_Z, _dominant_first, _gap_p, _lr_p, _within_noise
+from ._holdout import Holdout
 from ._inputs import _check_inputs, _split_library
-from ._labels import covariate_value
 from ._recheck import VariogramRecheck
 from ._report import Candidate, DiscoveryReport, FitState, Step
 from ._solve import _cov_full, _fit_batch, _Layout, _residual_view
 from ._structure import _binned_test
 from ._texture_term import CrossTexture, identity_whitened, with_texture
+from ._verdict import unexplained_structure
 
 __all__ = ["discover"]
 
@@ -134,6 +140,7 @@ class _Search:
         self.n_obs = int(data.n_obs)
         self.cross: CrossTexture | None = None  # set when the texture is carried (design effects)
         self.recheck: VariogramRecheck | None = None  # ... and the guard's second opinion
+        self.holdout: Holdout | None = None  # the winner must predict held-out scanlines
         # whitened by the texture's covariance, an LM step costs far more than a call's overhead: each fit alone
         # (batched, the baseline's 3 starts ran padded to the step's 16, every one until the slowest converged)
         self.solo = self.n_obs >= _SOLO_MIN_OBS or getattr(data, "whiten", None) is not None
@@ -146,6 +153,12 @@ class _Search:
         self.baseline_jobs = _baseline_jobs(self.layout, self.base)
         n_cand_jobs = sum(len(e.starts()) for e in testable)
         self.b_pad = max(len(self.baseline_jobs), n_cand_jobs, 1)
+
+    def sibling(self, data) -> _Search:
+        """The same search over other ``data`` of the same shapes, solved the same way: the run's compiled program."""
+        out = _Search(self.model, data, self.testable, self.lm_steps, self.chunk)
+        out.solo = self.solo
+        return out
 
     def fit(self, jobs):
         """Solve ``jobs`` (see :func:`_fit_batch`) at the run's padded width, batch width and step cap."""
@@ -457,51 +470,6 @@ def _make_step(e: Effect, win: Candidate, cands: list[Candidate], cur: _View, ne
     )
 
 
-def _unexplained_structure(search: _Search, cur: _View, partial: list[Candidate], structure_p: float):
-    """What the final model leaves unexplained, as report lines, and the binned test per covariate.
-
-    Lists a gap above the noise level, each covariate whose binned test is
-    significant at ``structure_p`` (Bonferroni over the covariates), and each
-    partial match that was supported but not named.
-    """
-    mask, st = search.mask, cur.state
-    r_flat = _flat(cur.r.reshape(np.shape(cur.pred)), mask)
-    unexplained: list[str] = []
-    structure: dict[str, dict] = {}
-    z = (st.chi2 - st.dof) / math.sqrt(2 * st.dof)
-    p_gap = float(ndtr(-z))
-    n_cov = max(len(cur.covs), 1)
-    for name, x in cur.covs.items():
-        chi2, dof, p, xc, mean, sem = _binned_test(r_flat, _flat(x, mask))
-        structure[name] = {
-            "chi2": chi2,
-            "dof": dof,
-            "p": p,
-            "worst_bin": float(xc[np.argmax(np.abs(mean))]) if len(xc) else math.nan,
-        }
-        if p < structure_p / n_cov:
-            unexplained.append(
-                f"unexplained discrepancy against {name} (binned χ² = {chi2:.1f} on {dof} bins, p = {p:.1e}; "
-                f"largest near {covariate_value(name, structure[name]['worst_bin'])})"
-            )
-    if p_gap < structure_p:
-        unexplained.insert(
-            0, f"gap {st.gap:.3f} exceeds the noise level (χ² = {st.chi2:.1f} on {st.dof} dof, p = {p_gap:.1e})"
-        )
-    for c in partial:
-        unexplained.append(
-            f"{c.effect} is supported (ΔBIC = {c.delta_bic:.1f}) but explains only "
-            f"{100 * c.explained:.0f} % of the excess: a partial match, not named"
-            + (
-                ""
-                if c.variogram is None
-                else f" (with the texture's covariance from the variogram: gap left "
-                f"{c.variogram.gap:.3f}, p = {c.variogram.gap_p:.1e})"
-            )
-        )
-    return unexplained, structure
-
-
 class _Steps:
     """The step loop's state: the current fit, the states so far, what was found, partial matches, ambiguities."""
 
@@ -540,6 +508,12 @@ class _Steps:
             win = cands[0]
             if not (win.delta_bic > 0 and win.p_value * len(remaining) < alpha):
                 break
+            hold = None if search.holdout is None else search.holdout(cur.state, win.state, win.delta_chi2)
+            if hold is not None:
+                win = dataclasses.replace(win, holdout=hold)
+                if not hold.passed:  # it fitted this capture's noise, not a signature both halves share
+                    self.partial.append(win)
+                    break
             if win.explained < min_explained and win.gap_p_after < structure_p:
                 win = _rechecked(search, cur.state, win)
                 v = win.variogram
@@ -579,12 +553,19 @@ def _baseline(model, data, testable, lm_steps: int, chunk: int, texture: bool):
     if carry and textured is None:  # no texture: the plain data (the identity costs a dense product per evaluation)
         search = _Search(model, data, testable, lm_steps, chunk)
     if textured is None:
-        return search, cur, None
+        return _with_holdout(search), cur, None
     data_tex, tex, cross = textured
     search = _Search(model, data_tex, testable, lm_steps, chunk)
     search.cross = cross
     search.recheck = VariogramRecheck(lambda d: _Search(model, d, testable, lm_steps, chunk), data, cur.pred, cur.rho)
-    return search, search.residual_view(_fit_baseline(search)), tex
+    return _with_holdout(search, tex.get("levels")), search.residual_view(_fit_baseline(search)), tex
+
+
+def _with_holdout(search: _Search, levels: dict | None = None) -> _Search:
+    """``search`` with the hold-out check of winners (:mod:`wardjax.effects._holdout`) where its data allow it."""
+    if search.model.kind == "scanline" and Holdout.applicable(search.data):
+        search.holdout = Holdout(search.sibling, search.data, levels)
+    return search
 
 
 def discover(
@@ -668,7 +649,16 @@ def discover(
     run = _Steps(cur)
     stopped = run.search(search, max_steps, alpha, min_explained, structure_p, stop_within_noise, sample)
     cur, states, found, steps, partial = run.cur, run.states, run.found, run.steps, run.partial
-    unexplained, structure = _unexplained_structure(search, cur, partial, structure_p)
+    mask, st = search.mask, cur.state
+    within = stopped or _gap_p(st.chi2, st.dof) >= structure_p
+    unexplained, structure = unexplained_structure(
+        _flat(cur.r.reshape(np.shape(cur.pred)), mask),
+        {k: _flat(x, mask) for k, x in cur.covs.items()},
+        st,
+        partial,
+        structure_p,
+        within,
+    )
     return DiscoveryReport(
         model=getattr(model, "title", type(model).__name__),
         model_kind=model.kind,

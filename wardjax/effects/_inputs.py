@@ -6,6 +6,14 @@ from ._library import library
 
 __all__: list[str] = []
 
+# not an effect of the library: what one capture's ratio cannot tell from the material, said in every report
+ROOM_LIGHT = (
+    "light from the room that the lamp-off frame does not remove, reflected by the probe, cancels from the "
+    "diffuse ratio (the standard sees it too) and leaves a scale on the specular lobe that ρs absorbs: not "
+    "identifiable from one capture (a second capture with the room dark, or a lamp-off frame taken with the "
+    "room as lit, separates it)"
+)
+
 
 def _check_inputs(model, data, alpha: float) -> None:
     """Reject a model without the interface ``discover`` uses, data of another kind, or a level outside (0, 1).
@@ -40,4 +48,6 @@ def _split_library(model, data, effects):
             testable.append(e)
         else:
             skipped.append((e.name, why, e.cancels_by_symmetry))
+    if model.library_kind == "scanline" and getattr(data, "kind", None) == "ratio":
+        skipped.append(("room_light", ROOM_LIGHT, True))
     return tuple(testable), skipped

@@ -150,3 +150,17 @@ def level_whitening(ell: np.ndarray, ok: np.ndarray, trend: np.ndarray) -> tuple
         stats.append(float(a @ b) ** 2 / max(float(b @ b), 1e-300) / s2b)
     deff = max(1.0, float(np.quantile(stats, 0.95)) / _CHI2_1_95)
     return P, {"sd": float(np.sqrt(s2 * (1.0 + v))), "rho": float(r), "nugget": float(v), "n": n, "deff": deff}
+
+
+def subset_whitening(s_n: int, idx: np.ndarray, rho: float, nugget: float, s2: float) -> np.ndarray:
+    """:func:`level_whitening`'s ``P`` ``(n, s_n)`` for the scanlines ``idx`` alone, under a covariance estimated
+    on all of them (``σ² (ρ^{|j−k|} + λ δ_{jk})``, the mean profiled): the levels of one half of the scanlines
+    (the hold-out check, :mod:`~wardjax.effects._holdout`)."""
+    idx = np.asarray(idx)
+    n = len(idx)
+    Linv = np.linalg.inv(np.linalg.cholesky(_corr(idx, rho, nugget)))
+    u = Linv @ np.ones(n)
+    w = Linv.T @ u / float(u @ u)
+    P = np.zeros((n, s_n))
+    P[:, idx] = (Linv - np.outer(u, w)) / np.sqrt(s2)
+    return P

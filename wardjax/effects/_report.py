@@ -19,10 +19,11 @@ from typing import NamedTuple
 import numpy as np
 
 from .._files import write_bytes_atomic
+from ._averaging import model_averaged
 from ._labels import covariate_label
 from ._structure import _binned_test
 
-__all__ = ["Candidate", "DiscoveryReport", "FitState", "Step", "VariogramRead"]
+__all__ = ["Candidate", "DiscoveryReport", "FitState", "HoldoutRead", "Step", "VariogramRead"]
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -39,6 +40,15 @@ class FitState:
     values: dict
     sigma: dict
     free: tuple[int, ...]  # indices of u the fit moved (an effect's optional parameters may stay held)
+
+
+class HoldoutRead(NamedTuple):
+    """The two-fold hold-out of one winner (:mod:`wardjax.effects._holdout`): ``gain``, the held-out ``χ²`` it
+    removed over both folds, its ``share`` of the in-sample Δχ², and whether it ``passed``."""
+
+    gain: float
+    share: float
+    passed: bool
 
 
 class VariogramRead(NamedTuple):
@@ -82,6 +92,11 @@ class Candidate:
         ``D ≥ 1`` that divided Δχ² in ΔBIC and the p-value: the texture
         between scanlines and channels (1 without the texture term; see
         :func:`wardjax.effects._texture.design_effect`).
+    holdout
+        :class:`HoldoutRead`: the winner fitted on half the scanlines
+        predicting the other half (:mod:`wardjax.effects._holdout`); read for
+        the winner of each step, ``None`` for the others and where the data
+        have too few scanlines.
     variogram
         :class:`VariogramRead`: the model with the effect (and the model
         without it) refitted under the texture's covariance from the
@@ -106,6 +121,7 @@ class Candidate:
     gap_p_after: float = math.nan
     design_effect: float = 1.0
     variogram: VariogramRead | None = None
+    holdout: HoldoutRead | None = None
 
     @property
     def converged(self) -> bool:
@@ -113,22 +129,27 @@ class Candidate:
 
     def as_dict(self) -> dict:
         v = {} if self.variogram is None else self.variogram._asdict()
-        return {f"{k}_variogram": _num(x) for k, x in v.items()} | {
-            k: _num(getattr(self, k))
-            for k in (
-                "effect",
-                "k",
-                "delta_chi2",
-                "delta_bic",
-                "p_value",
-                "explained",
-                "structure_p",
-                "physical",
-                "gap_p_after",
-                "design_effect",
-                "converged",
-            )
-        }
+        h = {} if self.holdout is None else self.holdout._asdict()
+        return (
+            {f"{k}_variogram": _num(x) for k, x in v.items()}
+            | {f"holdout_{k}": _num(x) for k, x in h.items()}
+            | {
+                k: _num(getattr(self, k))
+                for k in (
+                    "effect",
+                    "k",
+                    "delta_chi2",
+                    "delta_bic",
+                    "p_value",
+                    "explained",
+                    "structure_p",
+                    "physical",
+                    "gap_p_after",
+                    "design_effect",
+                    "converged",
+                )
+            }
+        )
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -249,9 +270,16 @@ class DiscoveryReport:
         """The search stopped because the gap is within what noise alone gives (``settings["stop_rule"]``)."""
         return bool(self.settings.get("stopped_within_noise", False))
 
+    @property
+    def averaged(self) -> dict[str, dict[str, float]]:
+        """The model's ρs and α averaged over the last step's candidate models by their evidence: ``value``,
+        ``sigma`` (with the model choice's spread) and ``sigma_model`` (the chosen model's); see
+        :mod:`wardjax.effects._averaging`."""
+        return model_averaged(self.steps, self.baseline)
+
     def verdict(self) -> str:
         if self.within_noise:
-            what = f"found {', '.join(self.found)}" if self.found else "nothing missing"
+            what = f"found {', '.join(self.found)}" if self.found else "nothing needed"
             if self.ambiguous:
                 what += "".join(f" (or {b}: not told apart)" for _, b, _ in self.ambiguous)
             v = self.settings.get("variogram_gap")
@@ -262,7 +290,7 @@ class DiscoveryReport:
         if self.found:
             return f"found {', '.join(self.found)}, but structure remains that no library effect explains"
         if self.explained:
-            return "nothing missing: the baseline explains the data to the noise level"
+            return "nothing needed: the baseline explains the data to the noise level"
         return "unexplained discrepancy: no library effect explains it"
 
     def to_dict(self) -> dict:
@@ -302,6 +330,7 @@ class DiscoveryReport:
                 "chi2": _num(self.final.chi2),
                 "dof": self.final.dof,
             },
+            "averaged": {k: {n: _num(v) for n, v in d.items()} for k, d in self.averaged.items()},
             "unexplained": list(self.unexplained),
             "partial": list(self.partial),
             "ambiguous": [{"named": a, "or": b, "delta_bic_difference": _num(d)} for a, b, d in self.ambiguous],
@@ -370,6 +399,16 @@ class DiscoveryReport:
             if s.effect in figures:
                 what = covariate_label(s.plot["covariate"]) if s.plot else ""
                 L.append(f"\n![residuals against {what}]({figures[s.effect]})\n")
+        if self.steps:
+            av = self.averaged
+            L.append("\n## Parameters with the model choice's uncertainty\n")
+            L.append(
+                ", ".join(
+                    f"{k} = {_fmt(d['value'], d['sigma'])} (chosen model: ± {d['sigma_model']:.2g})"
+                    for k, d in av.items()
+                )
+                + " — averaged over the last step's models by their evidence (weights ∝ exp(ΔBIC/2)).\n"
+            )
         if self.ambiguous:
             L.append("\n## Not told apart\n")
             L.extend(
@@ -392,7 +431,8 @@ class DiscoveryReport:
         L.append(
             f"\n_Criterion: largest ΔBIC, added if ΔBIC > 0, Bonferroni LR p < {self.settings['alpha']}, and "
             f"explaining ≥ {100 * self.settings['min_explained']:.0f} % of the excess or leaving a gap within the "
-            f"noise (with a texture: under either of its covariances). Time {self.seconds:.1f} s._"
+            f"noise (with a texture: under either of its covariances), and predicting held-out scanlines. "
+            f"Time {self.seconds:.1f} s._"
         )
         return "\n".join(L) + "\n"
 
