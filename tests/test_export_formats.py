@@ -325,3 +325,19 @@ def test_08_rectify_refuses_a_map_of_the_wrong_size(simulated):
         rectify_rho_d(np.zeros((10, 10, 3)), cap.rig.camera)
     with pytest.raises(ValueError, match="nothing to rectify"):
         rectify_rho_d(np.full((150, 200, 3), np.nan), cap.rig.camera)
+
+
+def test_09_a_lobe_that_cannot_be_converted_is_reported_not_written(tmp_path):
+    from types import SimpleNamespace
+
+    from wardjax.export._outputs import _write_render_formats
+
+    flat = wj.WardParams(rho_d=(0.5, 0.4, 0.3), rho_s=0.0, alpha_x=0.1, alpha_y=0.1)
+    fake = SimpleNamespace(
+        camera=None, params=flat, radiance=SimpleNamespace(params=flat), name="c", tangent=(1.0, 0.0)
+    )
+    fake.model = "isotropic"
+    files, extra = {}, {}
+    _write_render_formats(fake, tmp_path, np.zeros((2, 2, 3), np.float32), files, extra)
+    assert "ρs > 0" in extra["exports_error"] and "exports" not in extra
+    assert files == {} and list(tmp_path.iterdir()) == []

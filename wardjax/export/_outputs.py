@@ -232,16 +232,20 @@ def _write_render_formats(fit, out: Path, rho_d: np.ndarray, files: dict, extra:
             h, w = tex.mask.shape
             size_m = (w * tex.pixel_mm / 1000.0, h * tex.pixel_mm / 1000.0)
     rad = fit.radiance.params
-    blobs, section = material_exports(
-        rad,
-        normalization=RADIANCE_NORMALIZATION,
-        name=fit.name,
-        tangent=fit.tangent,
-        anisotropic=fit.model == "anisotropic",
-        size_m=size_m,
-        generator=f"wardjax {software_version()}",
-        rho_d_plane=plane,
-    )
+    try:
+        blobs, section = material_exports(
+            rad,
+            normalization=RADIANCE_NORMALIZATION,
+            name=fit.name,
+            tangent=fit.tangent,
+            anisotropic=fit.model == "anisotropic",
+            size_m=size_m,
+            generator=f"wardjax {software_version()}",
+            rho_d_plane=plane,
+        )
+    except ValueError as e:  # e.g. no specular lobe to convert (ρs = 0)
+        extra["exports_error"] = str(e).splitlines()[0]
+        return
     for fname, data in blobs.items():
         write_bytes_atomic(out / fname, data)
     files.update(MATERIAL_FILES)
