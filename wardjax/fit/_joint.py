@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from typing import TYPE_CHECKING
+from typing import Protocol, runtime_checkable
 
 import equinox as eqx
 import jax
@@ -26,8 +26,19 @@ from ..ward import NORMALIZATIONS, WardParams, ward_geometry
 from . import _varpro
 from ._data import SAMPLE_FILL, bucket_rows, clean_jit, moments_chunk, pad_rows, pad_samples
 
-if TYPE_CHECKING:
-    from ._scanline import ScanlineFit
+
+@runtime_checkable
+class ScanlineFits(Protocol):
+    """What the joint refit reads of the per-scanline fits (a :class:`~wardjax.ScanlineFit`).
+
+    Typed by what it reads rather than by the class, so that this module does
+    not import ``_scanline``, which imports it.
+    """
+
+    status: np.ndarray
+    normalization: str
+    _data: tuple
+
 
 __all__ = ["CombinedFit", "combined"]
 
@@ -130,7 +141,7 @@ def _joint_residual(y, a: _JointArgs, iso: bool):
     return jnp.sqrt(jnp.broadcast_to(a.w, a.f.shape)) * r
 
 
-def combined(res: ScanlineFit, model: str, *, errors: str, max_steps: int, rtol: float) -> CombinedFit:
+def combined(res: ScanlineFits, model: str, *, errors: str, max_steps: int, rtol: float) -> CombinedFit:
     iso = model == "isotropic"
     k = 1 if iso else 2
     # Cleaned with both axes padded to bucket sizes (padded samples unusable), so that batches of

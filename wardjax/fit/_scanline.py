@@ -174,15 +174,15 @@ def _geometry_chunk(f, wi, wo, mask, weights, *, normalization, dtype):
     return jnp.swapaxes(f, -1, -2), geom.u, geom.v, geom.g, jnp.swapaxes(w, -1, -2)
 
 
-@functools.partial(jax.jit, static_argnames=("iso", "rtol", "check"))
-def _search_chunk(prepared, *, iso, rtol, check):
-    return jax.vmap(lambda p: _varpro.solve_scanline(p, iso=iso, rtol=rtol, check=check))(prepared)
+@functools.partial(jax.jit, static_argnames=("iso", "rtol", "check", "steps"))
+def _search_chunk(prepared, *, iso, rtol, check, steps=None):
+    return jax.vmap(lambda p: _varpro.solve_scanline(p, iso=iso, rtol=rtol, check=check, steps=steps))(prepared)
 
 
-def _fast_chunk(f, wi, wo, mask, weights, n, *, iso, rtol, normalization, dtype, check):
+def _fast_chunk(f, wi, wo, mask, weights, n, *, iso, rtol, normalization, dtype, check, steps=None):
     # Geometry and moments as separate programs too: ~25 % less CPU than one.
     parts = _geometry_chunk(f, wi, wo, mask, weights, normalization=normalization, dtype=dtype)
-    return _search_chunk(moments_chunk(*parts, n, iso=iso), iso=iso, rtol=rtol, check=check)
+    return _search_chunk(moments_chunk(*parts, n, iso=iso), iso=iso, rtol=rtol, check=check, steps=steps)
 
 
 def fit_scanlines(
@@ -199,6 +199,7 @@ def fit_scanlines(
     chunk_size: int | None = None,
     devices=None,
     errors: str = "auto",
+    max_steps: int | None = None,
 ) -> ScanlineFit:
     """Fit the Ward model to each scanline of a batch, independently.
 
@@ -242,6 +243,11 @@ def fit_scanlines(
         variances) and the profile-likelihood ones where it fails;
         ``"gauss_newton"`` never profiles; ``"profile"`` profiles every converged
         fit. :attr:`ScanlineFit.errors` says which each fit reports.
+    max_steps
+        Levenberg–Marquardt steps after the grid start (fast solver; default
+        4, the anisotropic fit 8 more). A scanline whose last step still moved
+        its α by more than the tolerance gets status ``max_steps``: its
+        parameters are the best point found, not certified a minimum.
 
     Notes
     -----
@@ -273,6 +279,9 @@ def fit_scanlines(
     data = (f, wi, wo, mask, weights)
     kw = dict(iso=iso, normalization=normalization, solver=solver, devices=devices)
     check = errors == "auto"
+    if max_steps is not None and not (isinstance(max_steps, int | np.integer) and max_steps >= 1):
+        raise ValueError(f"max_steps must be a positive integer, got {max_steps!r}")
+    kw["steps"] = None if max_steps is None else int(max_steps)
     sol = _solve(data, dtype=dtype, chunk=chunk, check=check, **kw)
     if dtype == np.float32 and solver == "fast":
         # A float32 fit that is not certified (rounding can cancel the
@@ -323,7 +332,9 @@ def _placement(devices):
     return jax.sharding.NamedSharding(mesh, jax.sharding.PartitionSpec("scanline"))
 
 
-def _solve(data, *, iso, normalization, solver, dtype, chunk, devices=None, check=True) -> _varpro.ScanlineSolution:
+def _solve(
+    data, *, iso, normalization, solver, dtype, chunk, devices=None, check=True, steps=None
+) -> _varpro.ScanlineSolution:
     """Run the kernel over ``data = (f, wi, wo, mask, weights)`` in chunks; float64 NumPy results.
 
     The fast kernel sees the samples padded to :func:`~wardjax._shapes.bucket`
@@ -350,7 +361,9 @@ def _solve(data, *, iso, normalization, solver, dtype, chunk, devices=None, chec
             rows = -(-rows // len(devices)) * len(devices)  # whole rows on every device
             args = [None if a is None else jax.device_put(pad_rows(a[start:stop], rows), sharding) for a in data]
             if solver == "fast":
-                out = _fast_chunk(*args, n=n, iso=iso, rtol=rtol, normalization=normalization, dtype=dtype, check=check)
+                out = _fast_chunk(
+                    *args, n=n, iso=iso, rtol=rtol, normalization=normalization, dtype=dtype, check=check, steps=steps
+                )
             else:
                 out = _optimistix_chunk(*clean(*args, dtype=dtype), normalization=normalization)
             pieces.append((out, stop - start))  # dispatched asynchronously

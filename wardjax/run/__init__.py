@@ -22,6 +22,7 @@ if TYPE_CHECKING:  # the API as the type checker and the reader see it
     from ._fit_capture import CaptureFit as CaptureFit
     from ._fit_capture import fit_capture as fit_capture
     from ._smartphone import fit_smartphone_capture as fit_smartphone_capture
+    from ._progress import Stages as Stages
 
 # Each public name → the module defining it, imported on first use (PEP 562).
 _API = {
@@ -39,6 +40,7 @@ _API = {
     "CaptureFit": "._fit_capture",
     "fit_capture": "._fit_capture",
     "fit_smartphone_capture": "._smartphone",
+    "Stages": "._progress",
 }
 __all__ = [
     "BatchItem",
@@ -55,6 +57,7 @@ __all__ = [
     "CaptureFit",
     "fit_capture",
     "fit_smartphone_capture",
+    "Stages",
 ]
 
 
