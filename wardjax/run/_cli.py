@@ -283,7 +283,7 @@ def fit_cmd(
     import contextlib
 
     from ._batch import scanline_note
-    from ._progress import fit_with_progress
+    from ._fit_progress import fit_with_progress
 
     err = Console(stderr=True, emoji=False)
     missing = [str(p) for p in paths if not p.exists()]

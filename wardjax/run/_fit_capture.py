@@ -143,11 +143,8 @@ def fit_capture(
     band_rows
         Rows processed at a time (bounds the working memory of large images).
     max_steps
-        Levenberg–Marquardt steps of each scanline's own fit
-        (:func:`wardjax.fit_scanlines`; default 4). A scanline stopped at the
-        limit keeps the best point found; the joint material is fitted to every
-        scanline's data with its own convergence test, so the limit moves the
-        per-scanline parameters and the joint fit's starting point only.
+        LM steps of each scanline's own fit (:func:`wardjax.fit_scanlines`, default 4); the joint material has its
+        own convergence test, so the limit moves only the per-scanline values and the joint fit's start.
 
     Returns
     -------
