@@ -45,21 +45,16 @@ Evidence: why BIC *and* a boundary-corrected likelihood ratio
     effects).
 
 Guard against confident wrong names
-    A library effect that is strongly supported but explains less than
-    ``min_explained`` of the current excess (``χ² − dof``) *and* leaves a gap
-    that still exceeds the noise level (``P(χ²_dof ≥ χ²_after) < structure_p``)
-    is *not* added: a large discrepancy that a library effect only dents is
-    the signature of an effect outside the library that it partly mimics. It
-    is reported as a partial match next to the unexplained structure.
+    A library effect that is strongly supported but explains less than ``min_explained`` of the current excess
+    (``χ² − dof``) *and* leaves a gap that still exceeds the noise level (``P(χ²_dof ≥ χ²_after) < structure_p``) is
+    *not* added: a large discrepancy that a library effect only dents is the signature of an effect outside the
+    library that it partly mimics. It is reported as a partial match next to the unexplained structure.
 
-    Both conditions are needed. The excess ``χ² − dof`` carries the noise of
-    χ² itself, SD ``√(2 dof)`` (≈ 110 on 6,144 residuals): an effect whose
-    residual signature is mostly absorbed by the baseline (a γ mismatch at
-    ``ε ≈ −0.1`` moves the data by 5 σ RMS, of which ρd, ρs and α take all but
-    ``Δχ² ≈ 30``) is decisively supported, yet "explains" a small fraction of
-    an excess that is mostly noise. When the model with the effect leaves no
-    significant gap, nothing is left for an out-of-library effect to explain
-    and the effect is named.
+    Both conditions are needed. The excess ``χ² − dof`` carries the noise of χ² itself, SD ``√(2 dof)`` (≈ 110 on
+    6,144 residuals): an effect whose residual signature is mostly absorbed by the baseline (a γ mismatch at
+    ``ε ≈ −0.1`` moves the data by 5 σ RMS, of which ρd, ρs and α take all but ``Δχ² ≈ 30``) is decisively
+    supported, yet "explains" a small fraction of an excess that is mostly noise. When the model with the effect
+    leaves no significant gap, nothing is left for an out-of-library effect to explain and the effect is named.
 """
 
 from __future__ import annotations
@@ -489,7 +484,7 @@ class _Steps:
         self.variogram_gap = gap
         return True
 
-    def search(self, search, max_steps, alpha, min_explained, structure_p, stop_within_noise, sample) -> bool:
+    def search(self, search, max_steps, alpha, min_explained, structure_p, stop_within_noise, sample, say) -> bool:
         """Add effects until none is justified; True if it stopped because the gap is within the noise."""
         testable = search.testable
         for _ in range(max_steps):
@@ -501,6 +496,7 @@ class _Steps:
             remaining = [i for i in range(len(testable)) if i not in cur.state.active]
             if not remaining:
                 break
+            say(f"step {len(self.steps) + 1}: testing {len(remaining)} candidate effects")
             ranked = _rank_candidates(search, cur, remaining)
             if ranked is None:
                 break
@@ -583,6 +579,7 @@ def discover(
     seed: int = 0,
     texture: bool = False,
     stop_within_noise: bool = True,
+    progress: Callable[[str], object] = lambda _: None,
 ) -> DiscoveryReport:
     """Find, name and add the effects the data need beyond ``model``.
 
@@ -631,6 +628,8 @@ def discover(
         Carry the probe's ρd texture in the model as a Gaussian process whose
         autocovariance is estimated from the baseline's residuals
         (:mod:`wardjax.effects._texture`), where it is significant.
+    progress
+        Told ``"step k: testing n candidate effects"`` as each step begins.
 
     Returns
     -------
@@ -647,7 +646,7 @@ def discover(
     if keep_plot_data:
         sample = _plot_sampler(search.mask, int(search.mask.sum()) if search.mask is not None else cur.r.size, seed)
     run = _Steps(cur)
-    stopped = run.search(search, max_steps, alpha, min_explained, structure_p, stop_within_noise, sample)
+    stopped = run.search(search, max_steps, alpha, min_explained, structure_p, stop_within_noise, sample, progress)
     cur, states, found, steps, partial = run.cur, run.states, run.found, run.steps, run.partial
     mask, st = search.mask, cur.state
     within = stopped or _gap_p(st.chi2, st.dof) >= structure_p

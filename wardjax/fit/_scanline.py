@@ -176,9 +176,9 @@ def _geometry_chunk(f, wi, wo, mask, weights, *, normalization, dtype):
     return jnp.swapaxes(f, -1, -2), geom.u, geom.v, geom.g, jnp.swapaxes(w, -1, -2)
 
 
-@functools.partial(jax.jit, static_argnames=("iso", "rtol", "check"))
-def _search_chunk(prepared, *, iso, rtol, check):
-    return jax.vmap(lambda p: _varpro.solve_scanline(p, iso=iso, rtol=rtol, check=check))(prepared)
+@functools.partial(jax.jit, static_argnames=("iso", "rtol", "check", "steps"))
+def _search_chunk(prepared, *, iso, rtol, check, steps=None):
+    return jax.vmap(lambda p: _varpro.solve_scanline(p, iso=iso, rtol=rtol, check=check, steps=steps))(prepared)
 
 
 @jax.jit
@@ -189,10 +189,10 @@ def _sandwich_chunk(sol: _varpro.ScanlineSolution, f, u, v, g, w) -> _varpro.Sca
     return sol._replace(cov=hc)
 
 
-def _fast_chunk(f, wi, wo, mask, weights, n, *, iso, rtol, normalization, dtype, check, sandwich):
+def _fast_chunk(f, wi, wo, mask, weights, n, *, iso, rtol, normalization, dtype, check, sandwich, steps=None):
     # Geometry and moments as separate programs too: ~25 % less CPU than one.
     parts = _geometry_chunk(f, wi, wo, mask, weights, normalization=normalization, dtype=dtype)
-    sol = _search_chunk(moments_chunk(*parts, n, iso=iso), iso=iso, rtol=rtol, check=check)
+    sol = _search_chunk(moments_chunk(*parts, n, iso=iso), iso=iso, rtol=rtol, check=check, steps=steps)
     return _sandwich_chunk(sol, *parts) if sandwich else sol
 
 
@@ -210,6 +210,7 @@ def fit_scanlines(
     chunk_size: int | None = None,
     devices=None,
     errors: str = "auto",
+    max_steps: int | None = None,
 ) -> ScanlineFit:
     """Fit the Ward model to each scanline of a batch, independently.
 
@@ -253,6 +254,11 @@ def fit_scanlines(
         variances) and the profile-likelihood ones where it fails;
         ``"gauss_newton"`` never profiles; ``"profile"`` profiles every converged
         fit. :attr:`ScanlineFit.errors` says which each fit reports.
+    max_steps
+        Levenberg–Marquardt steps after the grid start (fast solver; default
+        4, the anisotropic fit 8 more). A scanline whose last step still moved
+        its α by more than the tolerance gets status ``max_steps``: its
+        parameters are the best point found, not certified a minimum.
 
     Notes
     -----
@@ -287,6 +293,9 @@ def fit_scanlines(
     # Without weights the residual variance is unknown and may follow the signal: the sandwich.
     sandwich = weights is None and errors != "gauss_newton" and solver == "fast"
     kw["sandwich"] = sandwich
+    if max_steps is not None and not (isinstance(max_steps, int | np.integer) and max_steps >= 1):
+        raise ValueError(f"max_steps must be a positive integer, got {max_steps!r}")
+    kw["steps"] = None if max_steps is None else int(max_steps)
     sol = _solve(data, dtype=dtype, chunk=chunk, check=check, **kw)
     if dtype == np.float32 and solver == "fast":
         # A float32 fit that is not certified (rounding can cancel the
@@ -338,7 +347,7 @@ def _placement(devices):
 
 
 def _solve(
-    data, *, iso, normalization, solver, dtype, chunk, devices=None, check=True, sandwich=False
+    data, *, iso, normalization, solver, dtype, chunk, devices=None, check=True, sandwich=False, steps=None
 ) -> _varpro.ScanlineSolution:
     """Run the kernel over ``data = (f, wi, wo, mask, weights)`` in chunks; float64 NumPy results.
 
@@ -375,6 +384,7 @@ def _solve(
                     dtype=dtype,
                     check=check,
                     sandwich=sandwich,
+                    steps=steps,
                 )
             else:
                 out = _optimistix_chunk(*clean(*args, dtype=dtype), normalization=normalization)

@@ -560,18 +560,23 @@ def sandwich_covariance(theta, rho_s, cov, scale, f, u, v, g, w):
     return bread @ meat @ bread
 
 
-def solve_scanline(p: Prepared, *, iso: bool, rtol: float, check: bool = True) -> ScanlineSolution:
+def solve_scanline(
+    p: Prepared, *, iso: bool, rtol: float, check: bool = True, steps: int | None = None
+) -> ScanlineSolution:
     """Search and statistics of one prepared scanline (stage B, vmapped over a chunk).
 
     ``check``: run :func:`curvature_check` (isotropic fits).
+    ``steps``: LM steps after the grid start (default ``ISO_STEPS``; the
+    anisotropic fit takes ``ANISO_STEPS`` more).
     """
+    n_steps = ISO_STEPS if steps is None else steps
     theta = grid_start(p)
     if iso:
-        theta, st = lm(theta, p, True, ISO_STEPS, rtol)
+        theta, st = lm(theta, p, True, n_steps, rtol)
     else:
         # Start from αx = αy at the grid optimum; the 2-D steps move both.
         theta = jnp.concatenate([theta, theta])
-        theta, st = lm(theta, p, False, ISO_STEPS + ANISO_STEPS, rtol)
+        theta, st = lm(theta, p, False, n_steps + ANISO_STEPS, rtol)
     k = theta.shape[0]
     n_par = 4 + k
     n_samples = p.n_samples

@@ -26,6 +26,7 @@ if TYPE_CHECKING:  # the API as the type checker and the reader see it
     from ._fit_photo import fit_photo_capture as fit_photo_capture
     from ._fit_photo import write_photo_outputs as write_photo_outputs
     from ._smartphone import fit_smartphone_capture as fit_smartphone_capture
+    from ._progress import Stages as Stages
 
 # Each public name → the module defining it, imported on first use (PEP 562).
 _API = {
@@ -47,6 +48,7 @@ _API = {
     "fit_photo_capture": "._fit_photo",
     "write_photo_outputs": "._fit_photo",
     "fit_smartphone_capture": "._smartphone",
+    "Stages": "._progress",
 }
 __all__ = [
     "BatchItem",
@@ -67,6 +69,7 @@ __all__ = [
     "fit_photo_capture",
     "write_photo_outputs",
     "fit_smartphone_capture",
+    "Stages",
 ]
 
 

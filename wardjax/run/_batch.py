@@ -38,6 +38,7 @@ from ..capture import CAPTURE_FILE, CaptureError, load_capture
 from ..export import write_capture_outputs
 from ._fit_capture import fit_capture
 from ._fit_photo import fit_photo_outputs
+from ._progress import stage
 from ._smartphone import fit_smartphone_capture
 
 __all__ = ["BatchItem", "check_outputs_apart", "find_captures", "fit_one", "run_batch", "SUMMARY_COLUMNS"]
@@ -68,8 +69,10 @@ SUMMARY_COLUMNS = (
 )
 
 
-def _fit_scanline(cap, out_dir: Path, created: str) -> dict:
-    return write_capture_outputs(fit_capture(cap), out_dir, created=created)
+def _fit_scanline(cap, out_dir: Path, created: str, max_steps: int | None = None) -> dict:
+    fitted = fit_capture(cap, max_steps=max_steps)
+    stage(f"{cap.name}: writing params.json, the texture, plots and material")
+    return write_capture_outputs(fitted, out_dir, created=created)
 
 
 # Fitters by capture method (``method`` in capture.toml): each fits a loaded capture and writes its outputs.
@@ -220,8 +223,10 @@ def scanline_note(doc: dict | None) -> str | None:
     if stopped == 0:
         return None
     return (
-        f"{stopped} of {total} scanlines stopped at the step limit (status max_steps): their parameters are the "
-        f"best point found, not certified; the joint fit is {doc['fit'].get('status', '?')}"
+        f"{stopped} of {total} scanlines stopped at the step limit (status max_steps): their own parameters are the "
+        f"best point found, not certified a minimum. The material reported is the joint fit to every scanline's "
+        f"data, whose own status is {doc['fit'].get('status', '?')}; the limit moves only the per-scanline values "
+        f"and the joint fit's start (raise it with wardjax fit --max-steps)"
     )
 
 
@@ -293,7 +298,13 @@ _STAGING = re.compile(r"(\.[0-9a-f]{8})?\.partial")
 
 
 def fit_one(
-    source: Path, name: str, out: Path, created: str, force: bool = False, hold_out: int | None = None
+    source: Path,
+    name: str,
+    out: Path,
+    created: str,
+    force: bool = False,
+    hold_out: int | None = None,
+    max_steps: int | None = None,
 ) -> tuple[BatchItem, str | None]:
     """Fit one capture of a batch into ``out/<name>/``: the unit of work, locally or as a cluster task.
 
@@ -327,7 +338,11 @@ def fit_one(
             raise CaptureError(CAPTURE_FILE, "method", f"no fitter for method {cap.method!r}")
         if hold_out is not None and cap.method not in ("flash", "multiview"):
             raise CaptureError(CAPTURE_FILE, "method", f"--hold-out needs a photograph capture, got {cap.method!r}")
-        doc = fitter(cap, staging, created=created, **({} if hold_out is None else {"hold_out": hold_out}))
+        kw: dict = {} if hold_out is None else {"hold_out": hold_out}
+        # the step limit is the scanline fits' (the other methods have none)
+        if max_steps is not None and cap.method == "scanline":
+            kw["max_steps"] = max_steps
+        doc = fitter(cap, staging, created=created, **kw)
         commit_folder(staging, out_dir, last="params.json")
         return BatchItem(source, name, "ok", params=doc), None
     except Exception as e:  # a bad capture must not sink the batch, nor leave half its outputs
@@ -348,6 +363,7 @@ def run_batch(
     on_start: Callable[[int, int, str], None] | None = None,
     scheduler=None,
     hold_out: int | None = None,
+    max_steps: int | None = None,
 ) -> list[BatchItem]:
     """Fit every capture under ``paths`` into ``out``; write ``out/summary.csv``.
 
@@ -374,6 +390,9 @@ def run_batch(
         :func:`wardjax.run.open_scheduler`. The outputs are the same files.
     hold_out
         Photograph captures: leave photo ``hold_out`` out of each fit and predict it.
+    max_steps
+        Levenberg–Marquardt steps of each scanline's own fit (see
+        :func:`wardjax.fit_capture`); default 4.
 
     Returns
     -------
@@ -388,7 +407,7 @@ def run_batch(
     # Microseconds: ``created`` also tells this batch's commits from an earlier batch's (a retried task
     # skips what this batch already wrote, a rerun skips what an earlier one did), even a second apart.
     created = datetime.datetime.now(datetime.UTC).isoformat(timespec="microseconds").replace("+00:00", "Z")
-    jobs = [(src, name, out, created, force, hold_out) for src, name in zip(captures, names)]
+    jobs = [(src, name, out, created, force, hold_out, max_steps) for src, name in zip(captures, names)]
     done: dict[int, BatchItem] = {}
     log: list[str] = []
 

@@ -176,6 +176,15 @@ def _pm(value: float | None, err: float | None) -> str:
     return f"{value:.4f} ± {e}"
 
 
+def _progress_option(f):
+    """``--progress/--no-progress``: one line per stage on stderr [default: when stderr is a terminal]."""
+    return click.option(
+        "--progress/--no-progress",
+        default=None,
+        help="Show each stage and its time on stderr [default: when stderr is a terminal].",
+    )(f)
+
+
 # --------------------------------------------------------------------------- demo
 
 
@@ -240,38 +249,6 @@ def gratings(display_name: str, viewing_name: str, out_dir: Path, orientation: s
 # --------------------------------------------------------------------------- fitting and simulating captures
 
 
-def _fit_with_progress(paths, out_dir: Path, force: bool, quiet: bool, client, err: Console, hold_out=None) -> list:
-    """:func:`~wardjax.run_batch` under a rich progress bar; each failed capture one line on ``err``."""
-    from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
-
-    from ._batch import run_batch
-
-    with Progress(
-        TextColumn("{task.description}"),
-        BarColumn(),
-        MofNCompleteColumn(),
-        TimeElapsedColumn(),
-        console=err,
-        disable=quiet,
-        transient=True,
-    ) as bar:
-        task = bar.add_task("fitting", total=None)
-
-        def on_start(i, n, name):
-            bar.update(task, total=n, completed=i, description=f"fitting {name}")
-
-        def progress(i, n, item):
-            bar.update(task, completed=i + 1)
-            if item.status == "error":  # the capture named once: by its output name, unless the error names its path
-                named = item.error.startswith(str(item.source))
-                text = item.error if named else f"{item.name}: {item.error}"
-                err.print(f"[bold red]error:[/] {escape(text)}", highlight=False, soft_wrap=True)
-
-        return run_batch(
-            paths, out_dir, force=force, progress=progress, on_start=on_start, scheduler=client, hold_out=hold_out
-        )
-
-
 @main.command("fit")
 @click.argument("paths", nargs=-1, required=True, type=click.Path(path_type=Path))
 @click.option(
@@ -282,6 +259,13 @@ def _fit_with_progress(paths, out_dir: Path, force: bool, quiet: bool, client, e
     help="Folder for the results: one subfolder per capture and summary.csv.",
 )
 @click.option("--force", is_flag=True, help="Refit captures whose results are already complete.")
+@click.option(
+    "--max-steps",
+    type=click.IntRange(1, 1000),
+    default=None,
+    help="Levenberg–Marquardt steps of each scanline's own fit [default: 4]; a scanline stopped at the limit "
+    "keeps its best point (status max_steps), the joint material has its own convergence test.",
+)
 @click.option("--quiet", is_flag=True, help="No progress bar or table.")
 @click.option(
     "--scheduler",
@@ -298,6 +282,7 @@ def _fit_with_progress(paths, out_dir: Path, force: bool, quiet: bool, client, e
     help="Photograph captures: fit all photos but photo K (0-based), predict it and write heldout.png "
     "(photo | prediction | residual) with its RMSE (linear, display) and PSNR.",
 )
+@_progress_option
 @click.pass_context
 def fit_cmd(
     ctx: click.Context,
@@ -307,6 +292,8 @@ def fit_cmd(
     quiet: bool,
     scheduler: str | None,
     hold_out: int | None,
+    max_steps: int | None,
+    progress: bool | None,
 ) -> None:
     """Fit capture folders (or folders of them): params.json, ρd texture, scanline plot, material.rad.
 
@@ -317,6 +304,7 @@ def fit_cmd(
     import contextlib
 
     from ._batch import color_note, scanline_note
+    from ._fit_progress import fit_with_progress
 
     err = Console(stderr=True, emoji=False)
     for path in paths:
@@ -343,7 +331,7 @@ def fit_cmd(
                 return _fail(str(exc))
             if not quiet:
                 err.print(f"dask dashboard: {client.dashboard_link}", highlight=False, soft_wrap=True)
-        items = _fit_with_progress(paths, out_dir, force, quiet, client, err, hold_out)
+        items = fit_with_progress(paths, out_dir, force, quiet, client, err, progress, max_steps, hold_out)
     if not quiet:
         from rich.table import Table
 
@@ -726,25 +714,38 @@ _DIAGNOSE_SAMPLES = {True: 6_000, False: 20_000}
     "with its measured covariance along the scanline and between channels; what neighbouring columns share "
     "discounts the evidence). Without it a textured probe's texture swamps every effect.",
 )
-def diagnose_cmd(capture: Path, out_dir: Path, max_steps: int, max_samples: int | None, texture: bool) -> None:
+@_progress_option
+def diagnose_cmd(
+    capture: Path, out_dir: Path, max_steps: int, max_samples: int | None, texture: bool, progress: bool | None
+) -> None:
     """Find the effects a capture needs beyond the Ward model: report.json, report.md, residual plots."""
-    from ..capture import CAPTURE_FILE, Capture, CaptureError, load_capture
-    from ..effects import ScanlineModel, discover
-    from ..effects._capture import capture_data
+    from ._progress import Stages
 
     _check_name_length(capture)
     if not capture.exists():
         _fail(f"{capture}: no such capture folder")
     _check_out_dir(out_dir)
-    try:
-        cap = load_capture(capture)
-        if not isinstance(cap, Capture):
-            raise CaptureError(CAPTURE_FILE, "method", f"diagnose reads method = 'scanline', got {cap.method!r}")
-        data = capture_data(cap, max_samples=_DIAGNOSE_SAMPLES[texture] if max_samples is None else max_samples)
-        rep = discover(ScanlineModel(cap.config.fit.normalization), data, max_steps=max_steps, texture=texture)
-        rep.save(out_dir, extra={"capture": cap.name})
-    except (CaptureError, ValueError, OSError) as exc:
-        _fail(str(exc).splitlines()[0])
+    with Stages(progress) as stages:
+        stages.advance("loading the capture and JAX")
+        from ..capture import CAPTURE_FILE, Capture, CaptureError, load_capture
+        from ..effects import ScanlineModel, discover
+        from ..effects._capture import capture_data
+
+        try:
+            cap = load_capture(capture)
+            if not isinstance(cap, Capture):
+                raise CaptureError(CAPTURE_FILE, "method", f"diagnose reads method = 'scanline', got {cap.method!r}")
+            n = _DIAGNOSE_SAMPLES[texture] if max_samples is None else max_samples
+            stages.advance(f"reconstructing the probe's BRDF values (binned to ≤ {n:,} pixels per channel)")
+            data = capture_data(cap, max_samples=n)
+            model = ScanlineModel(cap.config.fit.normalization)
+            stages.advance("baseline fit (the model alone)")
+            rep = discover(model, data, max_steps=max_steps, texture=texture, progress=stages.advance)
+            stages.advance("writing report.json, report.md and the plots")
+            rep.save(out_dir, extra={"capture": cap.name})
+        except (CaptureError, ValueError, OSError) as exc:
+            stages.fail()  # the failed stage's line first, then the error
+            _fail(str(exc).splitlines()[0])
     gaps = " → ".join(f"{g:.3f}" for g in rep.gap)
     console.print(f"{cap.name}: {rep.verdict()}; gap {gaps}; report in {out_dir}/", highlight=False)
 
@@ -762,16 +763,22 @@ def diagnose_cmd(capture: Path, out_dir: Path, max_steps: int, max_samples: int 
     required=True,
     help="report.html (one self-contained file) or report.ipynb (the executed notebook).",
 )
-def report_cmd(fits_dir: Path, out_path: Path) -> None:
+@_progress_option
+def report_cmd(fits_dir: Path, out_path: Path, progress: bool | None) -> None:
     """Write a batch report of the fits in FITS_DIR (the --out folder of wardjax fit): an executed notebook."""
-    from ..report import write_report
+    from ._progress import Stages
 
     _check_name_length(fits_dir)
     _check_out_file(out_path)
-    try:
-        write_report(fits_dir, out_path)
-    except (ValueError, OSError) as exc:
-        _fail(str(exc).splitlines()[0])
+    with Stages(progress, compiles=False) as stages:  # the notebook's kernel compiles in its own process
+        stages.advance("loading the report's libraries")
+        from ..report import write_report
+
+        try:
+            write_report(fits_dir, out_path, progress=stages.advance)
+        except (ValueError, OSError) as exc:
+            stages.fail()
+            _fail(str(exc).splitlines()[0])
     console.print(f"wrote {out_path}", highlight=False)
 
 

@@ -38,6 +38,7 @@ from ..reconstruct import (
 )
 from ..texture import extract_rho_d
 from ..ward import Normalization, WardParams
+from ._progress import stage
 
 __all__ = ["CaptureFit", "fit_capture"]
 
@@ -130,7 +131,14 @@ def _joint_input(res: ScanlineFit) -> ScanlineFit:
     return dataclasses.replace(res, status=st)
 
 
-def fit_capture(cap, *, max_fit_samples: int = 50_000, band_rows: int = 512, hold_out: int | None = None):
+def fit_capture(
+    cap,
+    *,
+    max_fit_samples: int = 50_000,
+    band_rows: int = 512,
+    hold_out: int | None = None,
+    max_steps: int | None = None,
+):
     """Fit a loaded capture: material, uncertainties, texture and diagnostics.
 
     A photograph capture (``method = "flash"`` or ``"multiview"``) is fitted
@@ -151,6 +159,9 @@ def fit_capture(cap, *, max_fit_samples: int = 50_000, band_rows: int = 512, hol
         Rows processed at a time (bounds the working memory of large images).
     hold_out
         Photograph captures only: the photo to leave out and predict.
+    max_steps
+        LM steps of each scanline's own fit (:func:`wardjax.fit_scanlines`, default 4); the joint material has its
+        own convergence test, so the limit moves only the per-scanline values and the joint fit's start.
 
     Returns
     -------
@@ -178,6 +189,7 @@ def fit_capture(cap, *, max_fit_samples: int = 50_000, band_rows: int = 512, hol
 
     # The reconstruction is streamed: band by band, binned for the fit (and its flags kept); the
     # per-pixel values are made again, band by band, for the texture once the fit is known (_texture).
+    stage(f"{cap.name}: reconstructing the probe's BRDF values")
     setup = prepare_bands(cap, band_rows=band_rows)
     probe = setup.probe
     n_probe = int(probe.sum())
@@ -205,8 +217,10 @@ def fit_capture(cap, *, max_fit_samples: int = 50_000, band_rows: int = 512, hol
     F, WI, WO, X, Y, n_per = F[keep], WI[keep], WO[keep], X[keep], Y[keep], n_per[keep]
     x_scan = np.array([np.mean(X[s][np.isfinite(F[s, :, 0])]) for s in range(len(F))])
 
-    res = fit_scanlines(F, WI, WO, "isotropic", normalization=norm)
+    stage(f"{cap.name}: fitting {len(F)} scanlines")
+    res = fit_scanlines(F, WI, WO, "isotropic", normalization=norm, max_steps=max_steps)
     joint = _joint_input(res)
+    stage(f"{cap.name}: joint {cfg.fit.model} fit over the scanlines")
     comb = joint.combined(cfg.fit.model)
     if not np.isfinite(comb.params.rho_s) or comb.status == Status.INSUFFICIENT_DATA:
         raise CaptureError(
@@ -215,12 +229,14 @@ def fit_capture(cap, *, max_fit_samples: int = 50_000, band_rows: int = 512, hol
             f"no scanline carries a specular signal the Ward model can fit (joint fit: {comb.status.name.lower()})",
         )
     # Honest errors: the ρd texture aliases into (ρs, α) in a way no residual-based error sees.
+    stage(f"{cap.name}: the texture's share of the errors")
     cols_fit = np.flatnonzero(keep)
     tex_err = texture_field_covariance(F, WI, WO, cols_fit, comb.params, cfg.fit.model, norm)
     comb = with_texture_errors(comb, tex_err)
     if norm == RADIANCE_NORMALIZATION:
         rad = comb
     else:
+        stage(f"{cap.name}: refit in Radiance's normalisation")
         # The same data refitted in Radiance's normalisation, started from this fit:
         # same shapes, so the compiled joint solver is reused.
         rad = dataclasses.replace(joint, normalization=RADIANCE_NORMALIZATION).combined(cfg.fit.model)
@@ -228,6 +244,7 @@ def fit_capture(cap, *, max_fit_samples: int = 50_000, band_rows: int = 512, hol
             rad, texture_field_covariance(F, WI, WO, cols_fit, rad.params, cfg.fit.model, RADIANCE_NORMALIZATION)
         )
 
+    stage(f"{cap.name}: ρd texture at full resolution")
     rho_d = _texture(cap, setup, step, comb.params, norm)
     model_f, spec = _model_values(comb, WI, WO, norm)
     diagnostics = _diagnostics(probe, n_valid, counts, rho_d, b, F, model_f, n_per, x_scan, res, comb, tex_err)
