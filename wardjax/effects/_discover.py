@@ -73,11 +73,10 @@ from scipy.special import ndtr  # the normal tail: scipy.stats's own kernel, ~1 
 from ._effect import Effect, Param
 from ._evidence import _NOISE_Z, _dominant_first, _gap_p, _lr_p, _within_noise
 from ._inputs import _check_inputs, _split_library
-from ._labels import covariate_value
 from ._recheck import VariogramRecheck
 from ._report import Candidate, DiscoveryReport, FitState, Step
 from ._solve import _cov_full, _fit_batch, _Layout, _residual_view
-from ._structure import _binned_test
+from ._structure import _binned_test, covariate_value
 from ._texture_term import CrossTexture, identity_whitened, with_texture
 
 __all__ = ["discover"]

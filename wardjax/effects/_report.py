@@ -19,8 +19,7 @@ from typing import NamedTuple
 import numpy as np
 
 from .._files import write_bytes_atomic
-from ._labels import covariate_label
-from ._structure import _binned_test
+from ._structure import _binned_test, covariate_label
 
 __all__ = ["Candidate", "DiscoveryReport", "FitState", "Step", "VariogramRead"]
 
