@@ -29,7 +29,7 @@ from ._report import DiscoveryReport as DiscoveryReport
 from ._report import Step as Step
 from ._report import VariogramRead as VariogramRead
 from ._report import gap_figure as gap_figure
-from ._labels import covariate_label as covariate_label
+from ._structure import covariate_label as covariate_label
 
 __all__ = [
     "discover",

@@ -20,8 +20,7 @@ import numpy as np
 
 from .._files import write_bytes_atomic
 from ._averaging import model_averaged
-from ._labels import covariate_label
-from ._structure import _binned_test
+from ._structure import _binned_test, covariate_label
 
 __all__ = ["Candidate", "DiscoveryReport", "FitState", "HoldoutRead", "Step", "VariogramRead"]
 

@@ -19,9 +19,8 @@ import math
 import numpy as np
 from scipy.special import ndtr
 
-from ._labels import covariate_value
 from ._report import Candidate, FitState
-from ._structure import _binned_test
+from ._structure import _binned_test, covariate_value
 
 __all__ = ["unexplained_structure"]
 
