@@ -286,8 +286,7 @@ def fit_scanlines(
     check = errors == "auto"
     # Without weights the residual variance is unknown and may follow the signal: the sandwich.
     sandwich = weights is None and errors != "gauss_newton" and solver == "fast"
-    kw["sandwich"] = sandwich
-    sol = _solve(data, dtype=dtype, chunk=chunk, check=check, **kw)
+    sol = _solve(data, dtype=dtype, chunk=chunk, check=check, sandwich=sandwich, **kw)
     if dtype == np.float32 and solver == "fast":
         # A float32 fit that is not certified (rounding can cancel the
         # algebraic centring into a spurious optimum: ~3 in 10⁴ scanlines with
@@ -296,7 +295,12 @@ def fit_scanlines(
         if redo.size:
             sub = tuple(None if a is None else a[redo] for a in data)
             again = _solve(
-                sub, dtype=np.dtype(np.float64), chunk=_default_chunk(np.float64, devices), check=check, **kw
+                sub,
+                dtype=np.dtype(np.float64),
+                chunk=_default_chunk(np.float64, devices),
+                check=check,
+                sandwich=sandwich,
+                **kw,
             )
             for full, part in zip(sol, again):
                 full[redo] = part
