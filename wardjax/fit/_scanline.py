@@ -18,10 +18,12 @@ papers' rig (lamp and camera in the plane x = 0, scanlines along y) a single
 scanline barely constrains αx; the joint fit over scanlines at different x
 offsets is where anisotropy is identified.
 
-Uncertainties are ``√diag((JᵀWJ)⁻¹ · χ²/dof)``: the Gauss–Newton covariance
-at the solution scaled by the residual variance. With ``weights = 1/σ²`` from
-a correct noise model χ²/dof ≈ 1 and the scaling is harmless; with unit
-weights it supplies the noise level.
+Uncertainties with weights are ``√diag((JᵀWJ)⁻¹ · χ²/dof)``: the Gauss–Newton
+covariance at the solution scaled by the residual variance (with ``weights = 1/σ²``
+from a correct noise model χ²/dof ≈ 1 and the scaling is harmless). Without
+weights the noise may grow with the signal, and the default reports the sandwich
+covariance ``(JᵀJ)⁻¹ (Σ r² JᵢᵀJᵢ) (JᵀJ)⁻¹`` instead (White 1980). Where χ² is not
+quadratic over one standard error, profile-likelihood errors replace either.
 
 Fits run in float64 inside a scoped ``jax.enable_x64(True)``: importing or
 calling wardjax never changes the caller's global JAX settings.
@@ -84,9 +86,11 @@ class ScanlineFit:
     status
         ``(S,)`` :class:`Status` codes; :attr:`status_names` reads them.
     errors
-        ``(S,)`` which standard errors of ρs and α each fit reports:
-        ``"gauss_newton"`` (the scaled inverse curvature) or ``"profile"`` (half-widths
-        of the 68 % profile-likelihood intervals, where the curvature check failed;
+        ``(S,)`` which standard errors each fit reports: ``"gauss_newton"`` (the
+        scaled inverse curvature), ``"sandwich"`` (heteroscedasticity-consistent, for
+        fits without weights) or ``"profile"`` (half-widths of the 68 %
+        profile-likelihood intervals of ρs and α, where the curvature check failed;
+        for unweighted fits rescaled by the sandwich's ratio to Gauss–Newton;
         ``covariance`` is rescaled to match, correlations kept).
     """
 
@@ -247,12 +251,14 @@ def fit_scanlines(
         over a 1-D mesh, scanline axis); default ``jax.devices()``. Scanlines
         are independent, so the results do not depend on the devices.
     errors
-        Standard errors of ρs and α (isotropic fits, fast solver): ``"auto"``
-        (default) reports the Gauss–Newton ones where the curvature check passes
-        (the profiled χ² one standard error away rises by 1 ± 0.2 residual
-        variances) and the profile-likelihood ones where it fails;
-        ``"gauss_newton"`` never profiles; ``"profile"`` profiles every converged
-        fit. :attr:`ScanlineFit.errors` says which each fit reports.
+        Standard errors (fast solver): ``"auto"`` (default) reports the Gauss–Newton
+        ones with weights and the sandwich (heteroscedasticity-consistent) ones
+        without, and, for isotropic fits, the profile-likelihood ones of ρs and α
+        where the curvature check fails (χ² one standard error away does not rise
+        as a quadratic would, within 20 %); ``"gauss_newton"`` reports Gauss–Newton
+        errors only, with or without weights (no check, no sandwich: the fastest);
+        ``"profile"`` profiles every converged isotropic fit.
+        :attr:`ScanlineFit.errors` says which each fit reports.
 
     Notes
     -----
