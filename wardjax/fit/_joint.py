@@ -127,10 +127,10 @@ def _joint_residual(y, a: _JointArgs, iso: bool):
 
 
 def combined(
-    data: tuple, status: np.ndarray, normalization: str, model: str, *, errors: str, max_steps: int, rtol: float
+    data: tuple, scan_status: np.ndarray, normalization: str, model: str, *, errors: str, max_steps: int, rtol: float
 ) -> CombinedFit:
     """The joint refit of the scanlines ``data = (f, wi, wo, mask, weights)`` (as validated by
-    :func:`~wardjax.fit._data.validate`), whose per-scanline fits ended with ``status`` ``(S,)``.
+    :func:`~wardjax.fit._data.validate`), whose per-scanline fits ended with ``scan_status`` ``(S,)``.
     """
     iso = model == "isotropic"
     k = 1 if iso else 2
@@ -149,14 +149,14 @@ def combined(
     # saw no lobe: a scanline beside the highlight says where the lobe is *not*,
     # which is exactly what constrains αx.
     wfull = np.broadcast_to(w_c, f_c.shape)
-    use = np.all(np.sum(wfull > 0, axis=1) >= 3, axis=-1) & (status != Status.NONFINITE)
+    use = np.all(np.sum(wfull > 0, axis=1) >= 3, axis=-1) & (scan_status != Status.NONFINITE)
     n_use = int(np.sum(use))
     if n_use == 0:
         nan = WardParams.from_estimate(rho_d=np.full(3, np.nan), rho_s=np.nan, alpha_x=np.nan, alpha_y=np.nan)
         return CombinedFit(
             nan,
             nan,
-            np.full((len(status), 3), np.nan),
+            np.full((len(scan_status), 3), np.nan),
             np.full((k + 1, k + 1), np.nan),
             float("nan"),
             0,
@@ -230,7 +230,7 @@ def combined(
     grad = np.asarray(_joint_rho_d_mean_grad(jnp.asarray(y), args, iso, jnp.asarray(n_use))) / nat[None, :]
     rho_d_var = noise_var + np.einsum("ip,pq,iq->i", grad, cov, grad)
 
-    rho_d_full = np.full((len(status), 3), np.nan)
+    rho_d_full = np.full((len(scan_status), 3), np.nan)
     rho_d_full[use] = rho_d_s
     ax, ay = (nat[1], nat[1]) if iso else (nat[1], nat[2])
     sx, sy = (se[1], se[1]) if iso else (se[1], se[2])

@@ -18,10 +18,12 @@ papers' rig (lamp and camera in the plane x = 0, scanlines along y) a single
 scanline barely constrains αx; the joint fit over scanlines at different x
 offsets is where anisotropy is identified.
 
-Uncertainties are ``√diag((JᵀWJ)⁻¹ · χ²/dof)``: the Gauss–Newton covariance
-at the solution scaled by the residual variance. With ``weights = 1/σ²`` from
-a correct noise model χ²/dof ≈ 1 and the scaling is harmless; with unit
-weights it supplies the noise level.
+Uncertainties with weights are ``√diag((JᵀWJ)⁻¹ · χ²/dof)``: the Gauss–Newton
+covariance at the solution scaled by the residual variance (with ``weights = 1/σ²``
+from a correct noise model χ²/dof ≈ 1 and the scaling is harmless). Without
+weights the noise may grow with the signal, and the default reports the sandwich
+covariance ``(JᵀJ)⁻¹ (Σ r² JᵢᵀJᵢ) (JᵀJ)⁻¹`` instead (White 1980). Where χ² is not
+quadratic over one standard error, profile-likelihood errors replace either.
 
 Fits run in float64 inside a scoped ``jax.enable_x64(True)``: importing or
 calling wardjax never changes the caller's global JAX settings.
@@ -84,9 +86,11 @@ class ScanlineFit:
     status
         ``(S,)`` :class:`Status` codes; :attr:`status_names` reads them.
     errors
-        ``(S,)`` which standard errors of ρs and α each fit reports:
-        ``"gauss_newton"`` (the scaled inverse curvature) or ``"profile"`` (half-widths
-        of the 68 % profile-likelihood intervals, where the curvature check failed;
+        ``(S,)`` which standard errors each fit reports: ``"gauss_newton"`` (the
+        scaled inverse curvature), ``"sandwich"`` (heteroscedasticity-consistent, for
+        fits without weights) or ``"profile"`` (half-widths of the 68 %
+        profile-likelihood intervals of ρs and α, where the curvature check failed;
+        for unweighted fits rescaled by the sandwich's ratio to Gauss–Newton;
         ``covariance`` is rescaled to match, correlations kept).
     """
 
@@ -248,12 +252,14 @@ def fit_scanlines(
         over a 1-D mesh, scanline axis); default ``jax.devices()``. Scanlines
         are independent, so the results do not depend on the devices.
     errors
-        Standard errors of ρs and α (isotropic fits, fast solver): ``"auto"``
-        (default) reports the Gauss–Newton ones where the curvature check passes
-        (the profiled χ² one standard error away rises by 1 ± 0.2 residual
-        variances) and the profile-likelihood ones where it fails;
-        ``"gauss_newton"`` never profiles; ``"profile"`` profiles every converged
-        fit. :attr:`ScanlineFit.errors` says which each fit reports.
+        Standard errors (fast solver): ``"auto"`` (default) reports the Gauss–Newton
+        ones with weights and the sandwich (heteroscedasticity-consistent) ones
+        without, and, for isotropic fits, the profile-likelihood ones of ρs and α
+        where the curvature check fails (χ² one standard error away does not rise
+        as a quadratic would, within 20 %); ``"gauss_newton"`` reports Gauss–Newton
+        errors only, with or without weights (no check, no sandwich: the fastest);
+        ``"profile"`` profiles every converged isotropic fit.
+        :attr:`ScanlineFit.errors` says which each fit reports.
     max_steps
         Levenberg–Marquardt steps after the grid start (fast solver; default
         4, the anisotropic fit 8 more). A scanline whose last step still moved
@@ -292,11 +298,10 @@ def fit_scanlines(
     check = errors == "auto"
     # Without weights the residual variance is unknown and may follow the signal: the sandwich.
     sandwich = weights is None and errors != "gauss_newton" and solver == "fast"
-    kw["sandwich"] = sandwich
     if max_steps is not None and not (isinstance(max_steps, int | np.integer) and max_steps >= 1):
         raise ValueError(f"max_steps must be a positive integer, got {max_steps!r}")
     kw["steps"] = None if max_steps is None else int(max_steps)
-    sol = _solve(data, dtype=dtype, chunk=chunk, check=check, **kw)
+    sol = _solve(data, dtype=dtype, chunk=chunk, check=check, sandwich=sandwich, **kw)
     if dtype == np.float32 and solver == "fast":
         # A float32 fit that is not certified (rounding can cancel the
         # algebraic centring into a spurious optimum: ~3 in 10⁴ scanlines with
@@ -305,7 +310,12 @@ def fit_scanlines(
         if redo.size:
             sub = tuple(None if a is None else a[redo] for a in data)
             again = _solve(
-                sub, dtype=np.dtype(np.float64), chunk=_default_chunk(np.float64, devices), check=check, **kw
+                sub,
+                dtype=np.dtype(np.float64),
+                chunk=_default_chunk(np.float64, devices),
+                check=check,
+                sandwich=sandwich,
+                **kw,
             )
             for full, part in zip(sol, again):
                 full[redo] = part
