@@ -398,8 +398,8 @@ def test_an_effect_present_throughout_predicts_held_out_scanlines(halves):
 @pytest.mark.slow  # two discoveries
 def test_an_effect_in_half_the_scanlines_is_not_named_for_all(halves, monkeypatch):
     """Fitted to the half that has it, the response predicts the other half worse: not a camera response of the
-    whole image (a local artefact), so not named, and the report says why; without the hold-out the
-    partial-match guard refuses it instead (a response fitted to all scanlines explains under half the excess)."""
+    whole image (a local artefact), so not named, and the report says why (without the hold-out it is refused on
+    other grounds, with no word of held-out scanlines)."""
     rep = discover(ScanlineModel(), halves[1])
     assert rep.found == []
     assert any("gamma fits this capture" in u and "does not predict held-out scanlines" in u for u in rep.unexplained)
