@@ -51,6 +51,7 @@ MODELS = ("isotropic", "anisotropic")
 MAX_CLUSTERS = 4  # the largest count tried when the data choose it
 _SUBSAMPLE = 4096  # pixels fitted alone to seed the clusters
 _EM_ROUNDS = 4
+_NORMAL_ROUNDS = 6  # alternations of (labels, normals) with the lobes
 _STEPS = 8  # Levenberg–Marquardt steps per lobe fit (one compiled program for every call)
 
 
@@ -423,7 +424,7 @@ def _fit(f, wi, wo, w, t, lobe, model, n_clusters, normals, normalization, seed,
         theta_flat, s_flat, _ = pm.lobe_fit(theta, labels, flat, f, w, n_lobes=n_lobes, steps=_STEPS)
         before = float(jnp.sum(_pixel_chi2(theta_flat, s_flat, labels, flat, f, w)))
         if lobe == "clusters" and n_lobes > 1:
-            for _ in range(2):  # each pixel's label and normal chosen together, then the lobes refitted
+            for _ in range(_NORMAL_ROUNDS):  # each pixel's label and normal chosen together, then the lobes
                 labels, normal_map, keep, cov_ag = _labels_with_normals(theta, s, labels, data, t, normalization, ln_n)
                 geom = _geometry(wi, wo, normal_map, t, normalization)
                 theta, s, _ = pm.lobe_fit(theta, labels, geom, f, w, n_lobes=n_lobes, steps=_STEPS)
