@@ -78,10 +78,15 @@ def main(argv=None) -> None:
     t_sp, x = scipy_shared_fit(data.f_r[idx], data.sigma[idx], data.wi[idx], data.wo[idx])
     ours = wj.fit_pixels(data.f_r[idx], data.wi[idx], data.wo[idx], **kw)
     per_px = t_sp / idx.size
-    print(f"# {args.size}×{args.size} pixels × {scene.n_views} photos, float64, {jax.devices()[0].platform}, "
-          f"{os.cpu_count()} cores, load average {os.getloadavg()[0]:.1f}")
-    print(f"# SciPy least_squares on a {c}×{c} crop: {t_sp:.2f} s ({per_px * 1e3:.2f} ms/pixel); "
-          f"ρs {np.exp(x[-2]):.5f} α {np.exp(x[-1]):.5f} (wardjax on the crop: ρs {ours.rho_s[0]:.5f} α {ours.alpha_x[0]:.5f})")
+    print(
+        f"# {args.size}×{args.size} pixels × {scene.n_views} photos, float64, {jax.devices()[0].platform}, "
+        f"{os.cpu_count()} cores, load average {os.getloadavg()[0]:.1f}"
+    )
+    print(
+        f"# SciPy least_squares on a {c}×{c} crop: {t_sp:.2f} s ({per_px * 1e3:.2f} ms/pixel); "
+        f"ρs {np.exp(x[-2]):.5f} α {np.exp(x[-1]):.5f} "
+        f"(wardjax on the crop: ρs {ours.rho_s[0]:.5f} α {ours.alpha_x[0]:.5f})"
+    )
     print("| lobe | wardjax (s) | pixels/s | SciPy extrapolated (s) | × SciPy | lobes found |")
     print("|---|---|---|---|---|---|")
     for lobe, t, res in rows:

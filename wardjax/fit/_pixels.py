@@ -12,15 +12,18 @@ that is
   its own χ² (ρd profiled) is lowest, weighted by the cluster's share — hard
   EM on the mixture, four rounds. The count ``k`` is the one of lowest BIC of
   the mixture, ``−2 Σ_p log Σ_l π_l e^{−χ²_pl/2} + (k(1+d) + k − 1) ln n``,
-  ``n`` the number of observations, unless ``n_clusters`` fixes it;
+  ``n`` the number of observations, unless ``n_clusters`` fixes it; a count
+  whose clusters hold under 2 % of the pixels, or whose lobe no material has
+  (ρs > 1, α at its bound), is not considered;
 * ``"pixel"``: every pixel's own lobe where its photos see the highlight — a
   pixel keeps its lobe where :func:`~wardjax.fit_scanlines` certifies it
   (lobe detected at 5σ, α resolved) and it lowers the pixel's χ² by more than
   its BIC cost ``(1+d) ln n``; the others carry the shared lobe (label 0).
 
-``normals=True`` adds a normal per pixel (:mod:`._pixel_normals`), alternated
-twice with the lobes; a pixel keeps its normal where it lowers its χ² by more
-than ``2 ln n`` (BIC), else it stays flat.
+``normals=True`` adds a normal per pixel (:mod:`._pixel_normals`); a pixel
+keeps its normal where it lowers its χ² by more than ``2 ln n`` (BIC), else it
+stays flat. With clusters each pixel's normal is fitted under every lobe and
+the pixel takes the (lobe, normal) of lowest cost, alternated with the lobes.
 
 Standard errors are Gauss–Newton (the curvature of χ²); with ``weights``
 (``1/σ²``) they are taken as given, without them every variance is scaled by
@@ -219,7 +222,7 @@ def _clusters(data, geom, shared, d, n_clusters, seed, normalization, ln_n):
     theta1, s1, chi2_1 = shared
     slots = max(MAX_CLUSTERS, n_clusters or 0)
     counts = [n_clusters] if n_clusters else list(range(1, MAX_CLUSTERS + 1))
-    min_size = max(10, p // 200)  # a cluster must hold 0.5 % of the pixels
+    min_size = max(10, p // 50)  # a cluster must hold 2 % of the pixels
     bic: dict[int, float] = {}
     best = None
     for k in counts:
@@ -229,7 +232,7 @@ def _clusters(data, geom, shared, d, n_clusters, seed, normalization, ln_n):
         else:
             if feats.shape[0] < 5 * k:
                 break
-            centres, _ = kmeans2(feats, k, seed=np.random.default_rng(seed), minit="++")
+            centres, _ = kmeans2(feats, k, rng=np.random.default_rng(seed), minit="++")
             theta = np.full((slots, d), math.log(0.1))
             theta[:k] = centres[:, 1:2]
             s = np.zeros(slots)
@@ -245,8 +248,9 @@ def _clusters(data, geom, shared, d, n_clusters, seed, normalization, ln_n):
             costs = pm.assign_costs(theta, s, geom, f, w, n_lobes=slots)
             labels = jnp.argmin(costs - 2.0 * log_pi, 1).astype(jnp.int32)
             sizes = np.bincount(np.asarray(labels), minlength=slots)[:k]
-            if np.any(sizes < min_size):
-                continue  # a cluster the data do not support
+            s_k, a_k = np.asarray(s[:k]), np.exp(np.asarray(theta[:k]))
+            if np.any(sizes < min_size) or np.any(s_k > 1.0) or np.any(a_k <= 1.01 * math.exp(pm.LOG_ALPHA_MIN)):
+                continue  # a cluster the data do not support, or a lobe no material has (ρs > 1, α at its bound)
             loglike = float(jnp.sum(jax.scipy.special.logsumexp(log_pi - 0.5 * costs, axis=1)))
             cand = (theta[:k], s[:k], labels)
         bic[k] = -2.0 * loglike + (k * (1 + d) + k - 1) * ln_n
