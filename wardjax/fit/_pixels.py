@@ -240,18 +240,18 @@ def _clusters(data, geom, shared, d, n_clusters, seed, normalization, ln_n):
             theta, s = jnp.asarray(theta), jnp.asarray(s)
             log_pi = jnp.asarray(np.where(np.arange(slots) < k, -math.log(k), -np.inf))
             for _ in range(_EM_ROUNDS):
-                labels = jnp.argmin(pm.assign_costs(theta, s, geom, f, w, n_lobes=slots) - 2.0 * log_pi, 1)
+                labels = jnp.argmin(pm.assign_costs(theta, s, geom, f, w, n_lobes=slots) - 2.0 * log_pi[None], 1)
                 labels = labels.astype(jnp.int32)
                 theta, s, _ = pm.lobe_fit(theta, labels, geom, f, w, n_lobes=slots, steps=_STEPS)
                 share = np.bincount(np.asarray(labels), minlength=slots) / p
                 log_pi = jnp.asarray(np.where(share > 0, np.log(np.maximum(share, 1e-300)), -np.inf))
             costs = pm.assign_costs(theta, s, geom, f, w, n_lobes=slots)
-            labels = jnp.argmin(costs - 2.0 * log_pi, 1).astype(jnp.int32)
+            labels = jnp.argmin(costs - 2.0 * log_pi[None], 1).astype(jnp.int32)
             sizes = np.bincount(np.asarray(labels), minlength=slots)[:k]
             s_k, a_k = np.asarray(s[:k]), np.exp(np.asarray(theta[:k]))
             if np.any(sizes < min_size) or np.any(s_k > 1.0) or np.any(a_k <= 1.01 * math.exp(pm.LOG_ALPHA_MIN)):
                 continue  # a cluster the data do not support, or a lobe no material has (ρs > 1, α at its bound)
-            loglike = float(jnp.sum(jax.scipy.special.logsumexp(log_pi - 0.5 * costs, axis=1)))
+            loglike = float(jnp.sum(jax.scipy.special.logsumexp(log_pi[None] - 0.5 * costs, axis=1)))
             cand = (theta[:k], s[:k], labels)
         bic[k] = -2.0 * loglike + (k * (1 + d) + k - 1) * ln_n
         if best is None or bic[k] < bic[best[0]]:
@@ -416,8 +416,9 @@ def _fit(f, wi, wo, w, t, lobe, model, n_clusters, normals, normalization, seed,
         theta, s, _ = pm.lobe_fit(theta, labels, geom, f, w, n_lobes=int(theta.shape[0]), steps=_STEPS)
         return theta, s, geom, n_map, kept, cov
 
-    if normals and lobe == "shared":
+    if normals and lobe != "pixel":  # normals under the shared lobe first: the clusters then see bump-free data
         theta, s, geom, normal_map, keep, cov_ag = with_normals(theta, s, labels, geom)
+        shared = (theta, s, pm.lobe_profile(theta, labels, geom, f, w, 1)[0])
     if lobe == "clusters":
         theta, s, labels, evidence["clusters"] = _clusters(data, geom, shared, d, n_clusters, seed, normalization, ln_n)
     elif lobe == "pixel":
