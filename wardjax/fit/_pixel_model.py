@@ -135,12 +135,11 @@ def _gram(cols: list[jax.Array], q: jax.Array, w: jax.Array) -> jax.Array:
     inv = jnp.where(sq > 0, 1.0 / jnp.where(sq > 0, sq, 1.0), 0.0)
     xq = [jnp.sum(qw * x, 1) for x in cols]
     m = len(cols)
-    rows = [[None] * m for _ in range(m)]
+    entries: dict[tuple[int, int], jax.Array] = {}
     for i in range(m):
         for j in range(i, m):
-            g = jnp.sum(jnp.sum(w * cols[i] * cols[j], 1) - xq[i] * xq[j] * inv, -1)
-            rows[i][j] = rows[j][i] = g
-    return jnp.stack([jnp.stack(r, -1) for r in rows], -2)
+            entries[i, j] = entries[j, i] = jnp.sum(jnp.sum(w * cols[i] * cols[j], 1) - xq[i] * xq[j] * inv, -1)
+    return jnp.stack([jnp.stack([entries[i, j] for j in range(m)], -1) for i in range(m)], -2)
 
 
 def _lobe_gram(theta, labels, geom, f, w, n_lobes, derivatives=True):

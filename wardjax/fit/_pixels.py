@@ -12,15 +12,18 @@ that is
   its own χ² (ρd profiled) is lowest, weighted by the cluster's share — hard
   EM on the mixture, four rounds. The count ``k`` is the one of lowest BIC of
   the mixture, ``−2 Σ_p log Σ_l π_l e^{−χ²_pl/2} + (k(1+d) + k − 1) ln n``,
-  ``n`` the number of observations, unless ``n_clusters`` fixes it;
+  ``n`` the number of observations, unless ``n_clusters`` fixes it; a count
+  whose clusters hold under 2 % of the pixels, or whose lobe no material has
+  (ρs > 1, α at its bound), is not considered;
 * ``"pixel"``: every pixel's own lobe where its photos see the highlight — a
   pixel keeps its lobe where :func:`~wardjax.fit_scanlines` certifies it
   (lobe detected at 5σ, α resolved) and it lowers the pixel's χ² by more than
   its BIC cost ``(1+d) ln n``; the others carry the shared lobe (label 0).
 
-``normals=True`` adds a normal per pixel (:mod:`._pixel_normals`), alternated
-twice with the lobes; a pixel keeps its normal where it lowers its χ² by more
-than ``2 ln n`` (BIC), else it stays flat.
+``normals=True`` adds a normal per pixel (:mod:`._pixel_normals`); a pixel
+keeps its normal where it lowers its χ² by more than ``2 ln n`` (BIC), else it
+stays flat. With clusters each pixel's normal is fitted under every lobe and
+the pixel takes the (lobe, normal) of lowest cost, alternated with the lobes.
 
 Standard errors are Gauss–Newton (the curvature of χ²); with ``weights``
 (``1/σ²``) they are taken as given, without them every variance is scaled by
@@ -51,6 +54,7 @@ MODELS = ("isotropic", "anisotropic")
 MAX_CLUSTERS = 4  # the largest count tried when the data choose it
 _SUBSAMPLE = 4096  # pixels fitted alone to seed the clusters
 _EM_ROUNDS = 4
+_NORMAL_ROUNDS = 6  # alternations of (labels, normals) with the lobes
 _STEPS = 8  # Levenberg–Marquardt steps per lobe fit (one compiled program for every call)
 
 
@@ -218,7 +222,7 @@ def _clusters(data, geom, shared, d, n_clusters, seed, normalization, ln_n):
     theta1, s1, chi2_1 = shared
     slots = max(MAX_CLUSTERS, n_clusters or 0)
     counts = [n_clusters] if n_clusters else list(range(1, MAX_CLUSTERS + 1))
-    min_size = max(10, p // 200)  # a cluster must hold 0.5 % of the pixels
+    min_size = max(10, p // 50)  # a cluster must hold 2 % of the pixels
     bic: dict[int, float] = {}
     best = None
     for k in counts:
@@ -228,7 +232,7 @@ def _clusters(data, geom, shared, d, n_clusters, seed, normalization, ln_n):
         else:
             if feats.shape[0] < 5 * k:
                 break
-            centres, _ = kmeans2(feats, k, seed=np.random.default_rng(seed), minit="++")
+            centres, _ = kmeans2(feats, k, rng=np.random.default_rng(seed), minit="++")
             theta = np.full((slots, d), math.log(0.1))
             theta[:k] = centres[:, 1:2]
             s = np.zeros(slots)
@@ -236,17 +240,18 @@ def _clusters(data, geom, shared, d, n_clusters, seed, normalization, ln_n):
             theta, s = jnp.asarray(theta), jnp.asarray(s)
             log_pi = jnp.asarray(np.where(np.arange(slots) < k, -math.log(k), -np.inf))
             for _ in range(_EM_ROUNDS):
-                labels = jnp.argmin(pm.assign_costs(theta, s, geom, f, w, n_lobes=slots) - 2.0 * log_pi, 1)
+                labels = jnp.argmin(pm.assign_costs(theta, s, geom, f, w, n_lobes=slots) - 2.0 * log_pi[None], 1)
                 labels = labels.astype(jnp.int32)
                 theta, s, _ = pm.lobe_fit(theta, labels, geom, f, w, n_lobes=slots, steps=_STEPS)
                 share = np.bincount(np.asarray(labels), minlength=slots) / p
                 log_pi = jnp.asarray(np.where(share > 0, np.log(np.maximum(share, 1e-300)), -np.inf))
             costs = pm.assign_costs(theta, s, geom, f, w, n_lobes=slots)
-            labels = jnp.argmin(costs - 2.0 * log_pi, 1).astype(jnp.int32)
+            labels = jnp.argmin(costs - 2.0 * log_pi[None], 1).astype(jnp.int32)
             sizes = np.bincount(np.asarray(labels), minlength=slots)[:k]
-            if np.any(sizes < min_size):
-                continue  # a cluster the data do not support
-            loglike = float(jnp.sum(jax.scipy.special.logsumexp(log_pi - 0.5 * costs, axis=1)))
+            s_k, a_k = np.asarray(s[:k]), np.exp(np.asarray(theta[:k]))
+            if np.any(sizes < min_size) or np.any(s_k > 1.0) or np.any(a_k <= 1.01 * math.exp(pm.LOG_ALPHA_MIN)):
+                continue  # a cluster the data do not support, or a lobe no material has (ρs > 1, α at its bound)
+            loglike = float(jnp.sum(jax.scipy.special.logsumexp(log_pi[None] - 0.5 * costs, axis=1)))
             cand = (theta[:k], s[:k], labels)
         bic[k] = -2.0 * loglike + (k * (1 + d) + k - 1) * ln_n
         if best is None or bic[k] < bic[best[0]]:
@@ -411,8 +416,9 @@ def _fit(f, wi, wo, w, t, lobe, model, n_clusters, normals, normalization, seed,
         theta, s, _ = pm.lobe_fit(theta, labels, geom, f, w, n_lobes=int(theta.shape[0]), steps=_STEPS)
         return theta, s, geom, n_map, kept, cov
 
-    if normals and lobe == "shared":
+    if normals and lobe != "pixel":  # normals under the shared lobe first: the clusters then see bump-free data
         theta, s, geom, normal_map, keep, cov_ag = with_normals(theta, s, labels, geom)
+        shared = (theta, s, pm.lobe_profile(theta, labels, geom, f, w, 1)[0])
     if lobe == "clusters":
         theta, s, labels, evidence["clusters"] = _clusters(data, geom, shared, d, n_clusters, seed, normalization, ln_n)
     elif lobe == "pixel":
@@ -423,7 +429,7 @@ def _fit(f, wi, wo, w, t, lobe, model, n_clusters, normals, normalization, seed,
         theta_flat, s_flat, _ = pm.lobe_fit(theta, labels, flat, f, w, n_lobes=n_lobes, steps=_STEPS)
         before = float(jnp.sum(_pixel_chi2(theta_flat, s_flat, labels, flat, f, w)))
         if lobe == "clusters" and n_lobes > 1:
-            for _ in range(2):  # each pixel's label and normal chosen together, then the lobes refitted
+            for _ in range(_NORMAL_ROUNDS):  # each pixel's label and normal chosen together, then the lobes
                 labels, normal_map, keep, cov_ag = _labels_with_normals(theta, s, labels, data, t, normalization, ln_n)
                 geom = _geometry(wi, wo, normal_map, t, normalization)
                 theta, s, _ = pm.lobe_fit(theta, labels, geom, f, w, n_lobes=n_lobes, steps=_STEPS)

@@ -157,7 +157,15 @@ def flash_views(
     light = cam + np.array([flash_offset, 0.0, 0.0])
     rs, al = np.asarray(rho_s, float), np.asarray(alpha, float)
     scene = FlashViews(
-        width, tuple(shape), cam, light, 1.0, np.asarray(rho_d, float), rs, al, bump_amplitude=bump_amplitude
+        width,
+        (int(shape[0]), int(shape[1])),
+        cam,
+        light,
+        1.0,
+        np.asarray(rho_d, float),
+        rs,
+        al,
+        bump_amplitude=bump_amplitude,
     )
     peak = float(np.max(render_flash_views(scene, bumps=False)))
     return scene._replace(light_power=0.7 / peak)
