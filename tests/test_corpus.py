@@ -1302,7 +1302,7 @@ def test_summary_lists_every_fit_in_the_folder(tmp_path):
     out = _write_fits(tmp_path / "fits")  # two finished fits from an earlier batch: scan, phone
     doc = json.loads((out / "scan" / "params.json").read_text())
     write_summary(out / "summary.csv", [BatchItem(tmp_path / "caps" / "new", "new", "ok", params=doc)])
-    rows = list(csv.DictReader((out / "summary.csv").open()))
+    rows = list(csv.DictReader(io.StringIO((out / "summary.csv").read_text())))
     assert [r["capture"] for r in rows] == ["new", "phone", "scan"]
     assert all(r["status"] == "ok" and r["rho_s"] for r in rows)
 
