@@ -114,7 +114,7 @@ def _writable_folder_reason(folder: Path) -> str | None:
 
 
 def _name_too_long(path: Path) -> str | None:
-    from .capture._rules import RuleError, check_path_name
+    from ._rules import RuleError, check_path_name
 
     try:
         check_path_name(path)
@@ -269,7 +269,7 @@ def check_regular_file(path, what: str = "file") -> None:
     A FIFO, a device such as ``/dev/urandom`` or a folder would hang a reader or feed it without
     end; a name too long for the file system is refused before any system call fails on it.
     """
-    from .capture._rules import RuleError, check_path_name
+    from ._rules import RuleError, check_path_name
 
     path = Path(path)
     try:
@@ -426,7 +426,7 @@ class _TooLarge(ValueError):
 
 def _check_pixels(path: Path, hw) -> None:
     """Refuse, from its header, an image of more pixels than ``LIMITS["pixels"]`` (before decoding it)."""
-    from .capture._rules import LIMITS
+    from ._rules import LIMITS
 
     h, w = (int(k) for k in hw)
     if h * w > LIMITS["pixels"]:

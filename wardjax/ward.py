@@ -183,7 +183,7 @@ class WardParams(eqx.Module):
         leaves = (self.rho_d, self.rho_s, self.alpha_x, self.alpha_y)
         if any(isinstance(leaf, Tracer) for leaf in leaves):
             return
-        from .capture._rules import check_ward_arrays
+        from ._rules import check_ward_arrays
 
         check_ward_arrays(*leaves)
 
