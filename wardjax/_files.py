@@ -22,6 +22,7 @@ import io
 import json
 import math
 import os
+import secrets
 import shutil
 import tempfile
 from collections.abc import Iterator
@@ -51,6 +52,7 @@ __all__ = [
     "remove_temporaries",
     "sha256",
     "srgb8",
+    "staged_folder",
     "write_bytes_atomic",
     "write_image",
     "write_json_atomic",
@@ -152,6 +154,25 @@ def check_writable_file(path) -> None:
         check_writable_dir(path.parent)
     except ValueError as e:
         raise ValueError(f"{path}: cannot write here: {str(e).split(': cannot write here: ', 1)[1]}") from None
+
+
+@contextlib.contextmanager
+def staged_folder(dest) -> Iterator[Path]:
+    """Yield a hidden staging folder beside ``dest``; when the block succeeds, move its files into ``dest``.
+
+    ``dest`` is made if missing and its files of the same names are replaced; if the block
+    raises, the staging folder is removed and ``dest`` is left as it was.
+    """
+    dest = Path(dest)
+    staging = dest.parent / f".{dest.name}.{secrets.token_hex(4)}.partial"
+    staging.mkdir(parents=True)
+    try:
+        yield staging
+        dest.mkdir(parents=True, exist_ok=True)
+        for f in sorted(staging.iterdir()):
+            os.replace(f, dest / f.name)
+    finally:
+        shutil.rmtree(staging, ignore_errors=True)
 
 
 def commit_folder(staging, dest, *, last: str) -> None:
