@@ -20,7 +20,15 @@ PACKAGE = Path(__file__).resolve().parents[1] / "wardjax"
 
 # The flow, written once. A module may import modules of its own stage and of
 # earlier ones; the base is shared by every stage.
-BASE = ("wardjax.ward", "wardjax.geometry", "wardjax._files", "wardjax._status", "wardjax._shapes", "wardjax._data")
+BASE = (
+    "wardjax.ward",
+    "wardjax.geometry",
+    "wardjax._files",
+    "wardjax._rules",
+    "wardjax._status",
+    "wardjax._shapes",
+    "wardjax._data",
+)
 STAGES = (
     "capture",
     "reconstruct",

@@ -621,8 +621,8 @@ def test_a_full_disk_is_refused_before_any_work(good, tmp_path, monkeypatch):
 
 def test_a_colour_correction_that_failed_is_refused():
     """The real ColorChecker photo's correction holds out at ΔE*ab ≈ 3–5 and passes; the same photo read
-    in reversed patch order, or a uniform grey photo, fits its own patches yet holds out far worse
-    (ΔE*ab 40 and more): refused by the rule, naming what to check."""
+    in reversed patch order fits its own patches yet holds out far worse: refused by the rule, naming
+    what to check. With no patch held out, the error cannot be estimated: refused too."""
     import tomllib
 
     from wardjax.capture._rules import MAX_HELD_OUT_DELTA_E, check_camera_correction
@@ -650,12 +650,5 @@ def test_a_colour_correction_that_failed_is_refused():
     with pytest.raises(RuleError, match="^chart.png: the colour correction failed: held-out ΔE") as info:
         check_camera_correction("chart.png", reversed_layout)
     assert len(str(info.value).splitlines()) == 1
-    grey = np.full_like(img, 128)
-    try:
-        flat = colorchecker_held_out_delta_E(colorchecker_rho_d(grey, regions, decoding="gamma2.2"), ref, usable=usable)
-    except ValueError:  # the fit itself refuses a chart of one colour: refused all the same
-        return
-    with pytest.raises(RuleError, match="failed"):
-        check_camera_correction("chart.png", flat)
     with pytest.raises(RuleError, match="cannot be estimated"):
         check_camera_correction("chart.png", np.full(24, np.nan))

@@ -829,7 +829,8 @@ def _report_input(fits: _Work, write: Callable[[Path], None]) -> None:
 
 def _params_edit(fits: _Work, name: str, edits) -> None:
     doc = apply_edits(fits["docs"][name], edits)
-    _report_input(fits, lambda f: (f / name / "params.json").write_text(json.dumps(doc)))
+    text = json.dumps(doc, default=str)  # a date (a TOML value) is written as JSON writes it: text
+    _report_input(fits, lambda f: (f / name / "params.json").write_text(text))
 
 
 ARRAYS = st.one_of(

@@ -22,6 +22,7 @@ import io
 import json
 import math
 import os
+import secrets
 import shutil
 import tempfile
 from collections.abc import Iterator
@@ -51,6 +52,7 @@ __all__ = [
     "remove_temporaries",
     "sha256",
     "srgb8",
+    "staged_folder",
     "write_bytes_atomic",
     "write_image",
     "write_json_atomic",
@@ -114,7 +116,7 @@ def _writable_folder_reason(folder: Path) -> str | None:
 
 
 def _name_too_long(path: Path) -> str | None:
-    from .capture._rules import RuleError, check_path_name
+    from ._rules import RuleError, check_path_name
 
     try:
         check_path_name(path)
@@ -152,6 +154,25 @@ def check_writable_file(path) -> None:
         check_writable_dir(path.parent)
     except ValueError as e:
         raise ValueError(f"{path}: cannot write here: {str(e).split(': cannot write here: ', 1)[1]}") from None
+
+
+@contextlib.contextmanager
+def staged_folder(dest) -> Iterator[Path]:
+    """Yield a hidden staging folder beside ``dest``; when the block succeeds, move its files into ``dest``.
+
+    ``dest`` is made if missing and its files of the same names are replaced; if the block
+    raises, the staging folder is removed and ``dest`` is left as it was.
+    """
+    dest = Path(dest)
+    staging = dest.parent / f".{dest.name}.{secrets.token_hex(4)}.partial"
+    staging.mkdir(parents=True)
+    try:
+        yield staging
+        dest.mkdir(parents=True, exist_ok=True)
+        for f in sorted(staging.iterdir()):
+            os.replace(f, dest / f.name)
+    finally:
+        shutil.rmtree(staging, ignore_errors=True)
 
 
 def commit_folder(staging, dest, *, last: str) -> None:
@@ -269,7 +290,7 @@ def check_regular_file(path, what: str = "file") -> None:
     A FIFO, a device such as ``/dev/urandom`` or a folder would hang a reader or feed it without
     end; a name too long for the file system is refused before any system call fails on it.
     """
-    from .capture._rules import RuleError, check_path_name
+    from ._rules import RuleError, check_path_name
 
     path = Path(path)
     try:
@@ -426,7 +447,7 @@ class _TooLarge(ValueError):
 
 def _check_pixels(path: Path, hw) -> None:
     """Refuse, from its header, an image of more pixels than ``LIMITS["pixels"]`` (before decoding it)."""
-    from .capture._rules import LIMITS
+    from ._rules import LIMITS
 
     h, w = (int(k) for k in hw)
     if h * w > LIMITS["pixels"]:

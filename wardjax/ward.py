@@ -150,6 +150,13 @@ _CHECKED: contextvars.ContextVar[bool] = contextvars.ContextVar("wardjax_ward_pa
 class WardParams(eqx.Module):
     """Ward BRDF parameters, a pytree that ``jit``, ``vmap`` and ``grad`` accept.
 
+    Construction refuses the impossible (``wardjax.capture._rules.check_ward_arrays``):
+    a non-finite leaf, ρd outside [0, 1], ρs < 0, ρd + ρs > 1 in a channel (energy
+    conservation, image-based paper eq. 1), α ≤ 0, raising ``RuleError`` (a
+    ``ValueError``) naming the field. Values traced under ``jit``, ``vmap`` or ``grad``
+    are not checked (they are not known yet); estimates (a fit's result, which noise
+    may carry past a bound, or a σ) are built with ``WardParams.from_estimate``.
+
     Parameters
     ----------
     rho_d
@@ -162,14 +169,6 @@ class WardParams(eqx.Module):
         bitangent ``y``: shape ``(...)``, > 0. Isotropic when equal.
 
     Batched parameters simply carry leading batch axes on every leaf.
-
-    Construction refuses the impossible (:func:`wardjax.capture.check_ward_arrays`): a
-    non-finite leaf, ρd outside [0, 1], ρs < 0, ρd + ρs > 1 in a channel (energy
-    conservation, image-based paper eq. 1), α ≤ 0, raising
-    :class:`~wardjax.capture.RuleError` naming the field. Values traced under
-    ``jit``/``vmap``/``grad`` are not checked (they are not known yet); estimates
-    (a fit's result, which noise may carry past a bound, or a σ) are built with
-    :meth:`from_estimate`.
     """
 
     # Annotated as stored: the converter has made every leaf an array (the constructor takes any array-like).
@@ -184,7 +183,7 @@ class WardParams(eqx.Module):
         leaves = (self.rho_d, self.rho_s, self.alpha_x, self.alpha_y)
         if any(isinstance(leaf, Tracer) for leaf in leaves):
             return
-        from .capture._rules import check_ward_arrays
+        from ._rules import check_ward_arrays
 
         check_ward_arrays(*leaves)
 

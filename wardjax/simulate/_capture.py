@@ -16,15 +16,12 @@ that is present in both frames (the background the dark frame removes).
 from __future__ import annotations
 
 import dataclasses
-import os
-import secrets
-import shutil
 from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
 
-from .._files import encode_image, write_bytes_atomic, write_image, write_json_atomic
+from .._files import encode_image, staged_folder, write_bytes_atomic, write_image, write_json_atomic
 from ..capture import CAPTURE_FILE, Capture, check_ward_params, load_capture
 from ..capture._rules import check_count, check_memory
 from ..export import RADIANCE_NORMALIZATION
@@ -190,38 +187,26 @@ def simulate_capture(
     ext = {"png": ".png", "tif": ".tif", "jpg": ".jpg"}[image_format]
     # Written beside ``out`` and loaded there first: a capture the loader refuses (a black lit image,
     # a rig it does not accept) leaves no file behind.
-    staging = out.parent / f".{out.name}.{secrets.token_hex(4)}.partial"
-    final, out = out, staging
-    try:
-        out.mkdir(parents=True, exist_ok=True)
+    with staged_folder(out) as stage:
         for stem, img in (("lit", lit), ("dark", dark_img if dark else None)):
             if img is not None:
-                write_image(out / f"{stem}{ext}", encode_image(img, encoding, bit_depth))
-        write_image(out / "truth_rho_d.tif", truth)
-
+                write_image(stage / f"{stem}{ext}", encode_image(img, encoding, bit_depth))
+        write_image(stage / "truth_rho_d.tif", truth)
         if model is None:
             model = "isotropic" if float(params.alpha_x) == float(params.alpha_y) else "anisotropic"
         config = _capture_config(
             rig, tangent, rho_standard, ext, dark, encoding, bit_depth, name, model, normalization, noise_floor
         )
-        write_capture_toml(
-            out / CAPTURE_FILE,
-            config,
-            header="Simulated by wardjax.simulate_capture; the truth is in truth.json and truth_rho_d.tif.",
-        )
+        header = "Simulated by wardjax.simulate_capture; the truth is in truth.json and truth_rho_d.tif."
+        write_capture_toml(stage / CAPTURE_FILE, config, header=header)
         truth_doc = {"params": _params_dict(params, base), "normalization": normalization, "renderer": renderer}
         truth_doc |= {"texture": tex_name, "texture_amplitude": texture_amplitude, "seed": seed, "exposure": exposure}
         truth_doc |= {"ambient": ambient, "noise": {"read": noise.read, "shot": noise.shot}}
-        write_json_atomic(out / "truth.json", truth_doc | {"tangent": list(map(float, tangent))})
-        load_capture(out)
-        final.mkdir(parents=True, exist_ok=True)
-        for f in sorted(staging.iterdir()):
-            os.replace(f, final / f.name)
-    finally:
-        shutil.rmtree(staging, ignore_errors=True)
-    cap = load_capture(final)
+        write_json_atomic(stage / "truth.json", truth_doc | {"tangent": list(map(float, tangent))})
+        load_capture(stage)
+    cap = load_capture(out)
     if not isinstance(cap, Capture):  # the folder just written has method = "scanline"
-        raise RuntimeError(f"{final}: the simulated capture did not load as a scanline capture")
+        raise RuntimeError(f"{out}: the simulated capture did not load as a scanline capture")
     return cap
 
 
