@@ -319,6 +319,15 @@ def write_photo_outputs(fit: PhotoFit, out_dir, *, created: str) -> dict:
     return jsonable(doc)
 
 
+# Above this fraction of negative ρd values the report says the fit is no physical material (a few are noise).
+_MAX_NEGATIVE_RHO_D = 0.1
+
+
+def _pm(value: float, err: float) -> str:
+    """``value ± err``; an error that rounds to zero at 4 decimals in scientific notation."""
+    return f"{value:.4f} ± {err:.4f}" if abs(err) >= 5e-5 or not np.isfinite(err) else f"{value:.4f} ± {err:.1e}"
+
+
 def report_text(fit: PhotoFit, params: WardParams, stderr: WardParams, doc: dict) -> str:
     """``report.md``: the capture, what the loader assumed, the lobes with σ, the held-out photo's errors."""
     cap = fit.capture
@@ -342,7 +351,7 @@ def report_text(fit: PhotoFit, params: WardParams, stderr: WardParams, doc: dict
     lob = doc["lobes"]
     for i, (s, a, b) in enumerate(zip(lob["rho_s"], lob["alpha_x"], lob["alpha_y"])):
         es, ea, eb = lob["rho_s_err"][i], lob["alpha_x_err"][i], lob["alpha_y_err"][i]
-        lines.append(f"| {i} | {s:.4f} ± {es:.4f} | {a:.4f} ± {ea:.4f} | {b:.4f} ± {eb:.4f} |")
+        lines.append(f"| {i} | {_pm(s, es)} | {_pm(a, ea)} | {_pm(b, eb)} |")
     if doc["reduced_chi2"] is not None:
         lines += ["", f"χ²/dof = {doc['reduced_chi2']:.3g} ({doc['dof']} degrees of freedom)."]
         if doc["reduced_chi2"] > 2:
@@ -352,10 +361,12 @@ def report_text(fit: PhotoFit, params: WardParams, stderr: WardParams, doc: dict
             )
     bad_lobe = [i for i, (s, a) in enumerate(zip(lob["rho_s"], lob["alpha_x"])) if s > 1 or a > 1]
     neg = float(np.mean(fit.rho_d[np.isfinite(fit.rho_d)] < 0)) if np.isfinite(fit.rho_d).any() else 0.0
-    if bad_lobe or neg > 0.01:
+    if bad_lobe or neg > _MAX_NEGATIVE_RHO_D:
+        why = [f"lobe {i} has ρs > 1 or α > 1" for i in bad_lobe]
+        why += [f"ρd < 0 in {100 * neg:.0f} % of the values"] if neg > _MAX_NEGATIVE_RHO_D else []
         lines.append(
-            f"Not a physical material: lobe(s) {bad_lobe} with ρs > 1 or α > 1, ρd < 0 in {100 * neg:.0f} % of the "
-            "values: the lobe is standing in for an effect the model lacks (above), not describing a specular peak."
+            f"Not a physical material ({'; '.join(why)}): the lobe stands in for an effect the model lacks, "
+            "it does not describe a specular peak."
         )
     ho = fit.held_out
     if ho is not None:

@@ -1,0 +1,105 @@
+"""Photograph captures fitted end to end: library and CLI, with a photo held out.
+
+A multiview capture rendered by wardjax's own Ward code (known ρd, ρs, α, and
+pixel noise of known σ) is imported from the rectified layout, fitted on all
+photos but one, and the held-out photo predicted: the lobe must come back
+within its tolerance and the held-out error must sit at the noise (a fit that
+only interpolated its own photos would not predict a new view). The real
+flash photos of ``tests/data/flash/`` go through ``wardjax fit`` and leave
+their report.
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+from test_photo_capture import CAMS, LIGHTS, TRUTH, _grid, _render
+
+import wardjax as wj
+from wardjax._files import encode_image, read_image, write_image
+from wardjax.run._cli import main
+
+DATA = Path(__file__).parent / "data" / "flash"
+NOISE = 0.004
+
+
+def _noisy_layout(folder: Path, rng, h=24, w=32) -> None:
+    folder.mkdir(parents=True)
+    pts = _grid(h, w, 120.0)
+    for k, (c, lt) in enumerate(zip(CAMS, LIGHTS)):
+        v, _, _ = _render(pts, np.asarray(c) * 10, np.asarray(lt) * 10, 900.0 * 100)
+        write_image(folder / f"{k}.png", encode_image(v + rng.normal(0, NOISE, v.shape), "linear", 16))
+    np.savetxt(folder / "camera_pos.txt", np.asarray(CAMS))
+    np.savetxt(folder / "light_pos.txt", np.asarray(LIGHTS))
+    (folder / "light_power.txt").write_text("900\n")
+    (folder / "image_size.txt").write_text("12\n")
+
+
+@pytest.fixture
+def multiview(tmp_path, rng):
+    _noisy_layout(tmp_path / "src", rng)
+    cap = wj.import_capture(tmp_path / "src", tmp_path / "cap", encoding="linear")
+    with open(tmp_path / "cap" / "capture.toml", "a") as fh:  # the noise the photos were drawn with
+        fh.write(f"\n[noise]\nread = {NOISE}\n")
+    del cap
+    return tmp_path / "cap"
+
+
+def test_01_multiview_lobe_and_held_out_photo(multiview):
+    cap = wj.load_capture(multiview)
+    out = wj.fit_capture(cap, hold_out=0)
+    assert isinstance(out, wj.PhotoFit) and out.photos_fitted == (1, 2, 3)
+    res = out.result
+    assert float(res.rho_s[0]) == pytest.approx(TRUTH.rho_s, rel=0.05)
+    assert float(res.alpha_x[0]) == pytest.approx(TRUTH.alpha_x, rel=0.05)
+    ok = np.isfinite(out.rho_d[..., 0])
+    assert ok.mean() > 0.9
+    z = (out.rho_d[ok] - np.asarray(TRUTH.rho_d)) / out.rho_d_stderr[ok]
+    assert 0.7 < np.std(z) < 1.4  # the per-pixel σ of ρd is the spread of its errors
+    ho = out.held_out
+    assert ho is not None and ho.k == 0 and ho.pixels > 0.9 * 24 * 32
+    # the new view predicted to the noise: its own noise plus that of ρd from the other 3 photos, √(1 + 1/3) = 1.15
+    assert ho.rmse_linear / ho.rmse_noise == pytest.approx(np.sqrt(1 + 1 / 3), abs=0.1)
+    assert ho.psnr == pytest.approx(20 * np.log10(1 / ho.rmse_display))
+
+
+def test_02_cli_fit_hold_out_writes_the_panel(multiview, tmp_path):
+    r = CliRunner().invoke(main, ["fit", str(multiview), "--out", str(tmp_path / "fits"), "--hold-out", "2"])
+    assert r.exit_code == 0, r.output
+    assert "held-out photo 2 (2.png): RMSE" in r.output and "PSNR" in r.output
+    d = tmp_path / "fits" / "cap"
+    doc = json.loads((d / "params.json").read_text())
+    assert doc["method"] == "multiview" and doc["fit"]["held_out"]["photo"] == 2
+    assert doc["fit"]["photos_fitted"] == [0, 1, 3]
+    panel = read_image(d / "heldout.png")
+    assert panel.shape == (24, 3 * 32 + 8, 3)  # photo | prediction | residual
+    assert read_image(d / "rho_d_sigma.tif", rgb=False).shape == (24, 32, 3)
+    assert "Held-out photo 2" in (d / "report.md").read_text()
+
+
+def test_03_cli_hold_out_of_a_single_photo_is_one_line(tmp_path):
+    src = tmp_path / "towel"
+    shutil.copytree(DATA / "green_towel", src)
+    r = CliRunner().invoke(main, ["fit", str(src), "--out", str(tmp_path / "fits"), "--hold-out", "0"])
+    assert r.exit_code == 2
+    errors = [line for line in r.output.splitlines() if line.startswith("error:")]
+    assert errors == ["error: towel: capture.toml: photos: --hold-out needs two photos or more; green_towel has 1"]
+    assert not (tmp_path / "fits" / "towel").exists()
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", sorted(p.name for p in DATA.iterdir() if (p / "capture.toml").is_file()))
+def test_04_each_real_photo_fitted_from_the_cli(tmp_path, name):
+    r = CliRunner().invoke(main, ["fit", str(DATA / name), "--out", str(tmp_path)])
+    assert r.exit_code == 0, r.output
+    doc = json.loads((tmp_path / name / "params.json").read_text())
+    assert doc["method"] == "flash" and doc["fit"]["dof"] > 0
+    report = (tmp_path / name / "report.md").read_text()
+    assert report.startswith(f"# {name} (flash, 1 photo)") and "| lobe | ρs | αx | αy |" in report
+    rho = read_image(tmp_path / name / "rho_d.tif", rgb=False)
+    assert rho.shape[2] == 3 and np.isfinite(rho).mean() > 0.8
