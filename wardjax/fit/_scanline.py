@@ -300,8 +300,8 @@ def fit_scanlines(
     sandwich = weights is None and errors != "gauss_newton" and solver == "fast"
     if max_steps is not None and not (isinstance(max_steps, int | np.integer) and max_steps >= 1):
         raise ValueError(f"max_steps must be a positive integer, got {max_steps!r}")
-    kw["steps"] = None if max_steps is None else int(max_steps)
-    sol = _solve(data, dtype=dtype, chunk=chunk, check=check, sandwich=sandwich, **kw)
+    steps = None if max_steps is None else int(max_steps)
+    sol = _solve(data, dtype=dtype, chunk=chunk, check=check, sandwich=sandwich, steps=steps, **kw)
     if dtype == np.float32 and solver == "fast":
         # A float32 fit that is not certified (rounding can cancel the
         # algebraic centring into a spurious optimum: ~3 in 10⁴ scanlines with
