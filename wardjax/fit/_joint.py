@@ -39,6 +39,8 @@ class ScanlineFits(Protocol):
     normalization: str
     _data: tuple
 
+    def __len__(self) -> int: ...
+
 
 __all__ = ["CombinedFit", "combined"]
 
