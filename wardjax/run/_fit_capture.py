@@ -128,10 +128,8 @@ def _joint_input(res: ScanlineFit) -> ScanlineFit:
 def fit_capture(cap, *, max_fit_samples: int = 50_000, band_rows: int = 512, hold_out: int | None = None):
     """Fit a loaded capture: material, uncertainties, texture and diagnostics.
 
-    A photograph capture (``method = "flash"`` or ``"multiview"``) is fitted
-    by :func:`wardjax.run.fit_photo_capture` (per-pixel ρd and lobes, one
-    batched call), which returns a :class:`~wardjax.run.PhotoFit`; with
-    ``hold_out = k`` photo ``k`` is left out of the fit and predicted.
+    A photograph capture (``flash``, ``multiview``) goes to :func:`wardjax.run.fit_photo_capture`
+    (a :class:`~wardjax.run.PhotoFit`; ``hold_out = k``: photo ``k`` left out and predicted).
 
     Parameters
     ----------
@@ -144,8 +142,6 @@ def fit_capture(cap, *, max_fit_samples: int = 50_000, band_rows: int = 512, hol
         ρs, αx, αy equal to 10⁻⁴ of their σ (the lobe spans hundreds of pixels).
     band_rows
         Rows processed at a time (bounds the working memory of large images).
-    hold_out
-        Photograph captures only: the photo to leave out and predict.
 
     Returns
     -------
