@@ -82,13 +82,31 @@ def test_02_cli_fit_hold_out_writes_the_panel(multiview, tmp_path):
     assert "Held-out photo 2" in (d / "report.md").read_text()
 
 
-def test_03_cli_hold_out_of_a_single_photo_is_one_line(tmp_path):
+@pytest.mark.parametrize(
+    ("edit", "args", "line"),
+    [
+        (
+            None,
+            ["--hold-out", "0"],
+            "towel: capture.toml: photos: --hold-out needs two photos or more; green_towel has 1",
+        ),
+        (
+            lambda t: t.replace('file = "point.jpg"', 'file = "point.jpg"\niso = 400'),
+            [],
+            "towel: capture.toml: photo.iso: 400 contradicts the EXIF of point.jpg (ISOSpeedRatings = 100); "
+            "correct or remove the field",
+        ),
+    ],
+    ids=["hold-out of one photo", "EXIF contradicts"],
+)
+def test_03_cli_bad_photo_capture_is_one_line_and_writes_nothing(tmp_path, edit, args, line):
     src = tmp_path / "towel"
     shutil.copytree(DATA / "green_towel", src)
-    r = CliRunner().invoke(main, ["fit", str(src), "--out", str(tmp_path / "fits"), "--hold-out", "0"])
+    if edit is not None:
+        (src / "capture.toml").write_text(edit((src / "capture.toml").read_text()))
+    r = CliRunner().invoke(main, ["fit", str(src), "--out", str(tmp_path / "fits"), *args])
     assert r.exit_code == 2
-    errors = [line for line in r.output.splitlines() if line.startswith("error:")]
-    assert errors == ["error: towel: capture.toml: photos: --hold-out needs two photos or more; green_towel has 1"]
+    assert [x for x in r.output.splitlines() if x.startswith("error:")] == [f"error: {line}"]
     assert not (tmp_path / "fits" / "towel").exists()
 
 

@@ -24,7 +24,6 @@ square of the length unit. MaterialGAN's images are gamma-2.2 encoded
 from __future__ import annotations
 
 import json
-import os
 import re
 import shutil
 import tempfile
@@ -32,6 +31,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .._files import commit_folder, write_bytes_atomic
 from ._errors import CAPTURE_FILE, CaptureError
 from ._photo import PhotoCapture
 
@@ -162,12 +162,10 @@ def import_capture(
     staging = Path(tempfile.mkdtemp(prefix=f".{out.name}.", suffix=".import", dir=out.parent.resolve()))
     try:
         for img in images:
-            shutil.copyfile(img, staging / img.name)
-        (staging / CAPTURE_FILE).write_text("\n".join(lines) + "\n", encoding="utf-8")
+            write_bytes_atomic(staging / img.name, img.read_bytes())
+        write_bytes_atomic(staging / CAPTURE_FILE, ("\n".join(lines) + "\n").encode())
         load_capture(staging)  # refused here: nothing is left at ``out``
-        if out.exists():
-            out.rmdir()
-        os.replace(staging, out)
+        commit_folder(staging, out, last=CAPTURE_FILE)
     finally:
         if staging.exists():
             shutil.rmtree(staging)

@@ -247,6 +247,17 @@ def color_note(doc: dict | None) -> str | None:
     )
 
 
+def held_out_note(doc: dict | None) -> str | None:
+    """One line on the held-out photo of a finished photograph fit (``wardjax fit --hold-out``), or ``None``."""
+    ho = (doc or {}).get("fit", {}).get("held_out")
+    if not ho:
+        return None
+    return (
+        f"held-out photo {ho['photo']} ({ho['file']}): RMSE {ho['rmse_linear']:.4g} linear "
+        f"(noise {ho['rmse_noise']:.3g}), {ho['rmse_display']:.4g} display, PSNR {ho['psnr_db']:.2f} dB"
+    )
+
+
 def _num(x) -> str:
     return "" if x is None else f"{float(x):.6g}"
 

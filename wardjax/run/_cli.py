@@ -15,6 +15,8 @@ import click
 from rich.console import Console
 from rich.markup import escape
 
+from ._cli_import import import_cmd
+
 __all__ = ["main"]
 
 # emoji=False: a path or a value such as ``a:b:`` is printed as typed, not with ``:b:`` turned into an emoji.
@@ -274,14 +276,8 @@ def gratings(display_name: str, viewing_name: str, out_dir: Path, orientation: s
     help="Fit each capture as a task on a dask.distributed cluster: a scheduler's address, or local:N to start "
     "N worker processes here [default: one capture after another in this process].",
 )
-@click.option(
-    "--hold-out",
-    type=click.IntRange(min=0),
-    default=None,
-    metavar="K",
-    help="Photograph captures: fit all photos but photo K (0-based), predict it and write heldout.png "
-    "(photo | prediction | residual) with its RMSE (linear, display) and PSNR.",
-)
+@click.option("--hold-out", type=click.IntRange(min=0), metavar="K", help="Photograph captures: fit all photos but "
+              "photo K (0-based), predict it: heldout.png (photo | prediction | residual), RMSE, PSNR.")  # fmt: skip
 @_progress_option
 @click.pass_context
 def fit_cmd(
@@ -303,7 +299,7 @@ def fit_cmd(
     """
     import contextlib
 
-    from ._batch import color_note, scanline_note
+    from ._batch import color_note, held_out_note, scanline_note
     from ._fit_progress import fit_with_progress
 
     err = Console(stderr=True, emoji=False)
@@ -362,13 +358,8 @@ def fit_cmd(
                 console.print(f"note: {it.name}: {note}", highlight=False, soft_wrap=True)
             if note := color_note(it.params):
                 console.print(f"colour: {it.name}: {note}", highlight=False, soft_wrap=True)
-            if it.params and (ho := it.params["fit"].get("held_out")):
-                console.print(
-                    f"{it.name}: held-out photo {ho['photo']} ({ho['file']}): RMSE {ho['rmse_linear']:.4g} linear "
-                    f"(noise {ho['rmse_noise']:.3g}), {ho['rmse_display']:.4g} display, PSNR {ho['psnr_db']:.2f} dB",
-                    highlight=False,
-                    soft_wrap=True,
-                )
+            if note := held_out_note(it.params):
+                console.print(f"{it.name}: {note}", highlight=False, soft_wrap=True)
     if any(it.status == "error" for it in items):
         sys.exit(2)
 
@@ -470,49 +461,7 @@ def simulate_cmd(
 # --------------------------------------------------------------------------- import (photograph datasets)
 
 
-@main.command("import")
-@click.argument("src", type=click.Path(path_type=Path))
-@click.option(
-    "--out",
-    "out_dir",
-    type=click.Path(file_okay=False, path_type=Path),
-    required=True,
-    help="The capture folder to write (new or empty).",
-)
-@click.option("--layout", type=click.Choice(["rectified"]), default="rectified", show_default=True)
-@click.option(
-    "--encoding",
-    type=click.Choice(["srgb", "gamma2.2", "linear"]),
-    default="srgb",
-    show_default=True,
-    help="How the images encode light (MaterialGAN's captures: gamma2.2).",
-)
-@click.option(
-    "--units",
-    type=click.Choice(["cm", "mm", "m"]),
-    default="cm",
-    show_default=True,
-    help="Length unit of camera_pos.txt, light_pos.txt, image_size.txt (and of light_power.txt's distances).",
-)
-@click.option("--name", default=None, help="The capture's name [default: the --out folder's name].")
-def import_cmd(src: Path, out_dir: Path, layout: str, encoding: str, units: str, name: str | None) -> None:
-    """Write a multiview capture folder from a dataset in the rectified layout (see docs/photographs.md)."""
-    if not src.is_dir():
-        _fail(f"{src}: no such dataset folder")
-    _check_out_dir(out_dir)
-    from ..capture import PhotoCapture, import_capture
-
-    try:
-        cap: PhotoCapture = import_capture(src, out_dir, layout=layout, encoding=encoding, units=units, name=name)
-    except (ValueError, OSError) as e:
-        _fail(str(e).splitlines()[0])
-    h, w, k, _ = cap.f_r.shape
-    console.print(
-        f"wrote capture [bold]{escape(cap.name)}[/]: {k} photos {w}×{h}, {cap.pixel_mm:.3g} mm a pixel, "
-        f"{int(cap.mask.any(axis=-1).sum())} pixels observed, to {escape(str(out_dir))}/",
-        highlight=False,
-        soft_wrap=True,
-    )
+main.add_command(import_cmd)
 
 
 # --------------------------------------------------------------------------- end import

@@ -141,10 +141,8 @@ def fit_capture(
 ):
     """Fit a loaded capture: material, uncertainties, texture and diagnostics.
 
-    A photograph capture (``method = "flash"`` or ``"multiview"``) is fitted
-    by :func:`wardjax.run.fit_photo_capture` (per-pixel ρd and lobes, one
-    batched call), which returns a :class:`~wardjax.run.PhotoFit`; with
-    ``hold_out = k`` photo ``k`` is left out of the fit and predicted.
+    A photograph capture (``flash``, ``multiview``) goes to :func:`wardjax.run.fit_photo_capture`
+    (a :class:`~wardjax.run.PhotoFit`; ``hold_out = k``: photo ``k`` left out and predicted).
 
     Parameters
     ----------
