@@ -80,9 +80,11 @@ def test_bad_input_is_one_clear_line():
 
 @pytest.mark.slow
 def test_radiance_renders_equal_the_forward_model():
-    scene = flash_views((8, 8))
+    scene = flash_views((16, 16))
     rad = radiance_render_flash_views(scene)
-    np.testing.assert_allclose(rad, render_flash_views(scene), rtol=1e-4, atol=1e-6)
+    np.testing.assert_allclose(rad, render_flash_views(scene), rtol=1e-5)
+    # The bump map is seen: Radiance's image is not the flat sample's.
+    assert np.max(np.abs(rad / render_flash_views(scene, bumps=False) - 1)) > 0.1
 
 
 @pytest.mark.slow
@@ -99,7 +101,7 @@ def test_pixel_lobes_where_the_highlight_is_seen():
 
 @pytest.mark.slow
 def test_clusters_and_normals_on_radiance_renders():
-    """Two materials and a bump map rendered by Radiance: lobes, labels, σ and the held-out photo."""
+    """Two materials and a bump map rendered by Radiance: lobes, labels, σ, and the held-out photo's error falls."""
     scene = flash_views((32, 32))
     images = radiance_render_flash_views(scene)
     data = flash_views_data(scene, images=images, seed=5)
@@ -120,7 +122,13 @@ def test_clusters_and_normals_on_radiance_renders():
     assert label_accuracy(res.labels, scene.labels().ravel()) >= 0.95
     z = (res.rho_d - scene.true_rho_d().reshape(-1, 3)) / res.stderr.rho_d
     assert 0.8 < robust_sd(z) < 1.25
-    pred = np.asarray(wj.predict_pixels(res, data.wi[:, :1], data.wo[:, :1]))
-    rmse = np.sqrt(np.mean((pred - data.f_r[:, :1]) ** 2))
-    noise = np.sqrt(np.mean(data.sigma[:, :1] ** 2))
-    assert rmse < 1.2 * noise
+    # The held-out photo is predicted better with normals than by the shared lobe alone.
+    flat = wj.fit_pixels(
+        data.f_r[:, fit_views], data.wi[:, fit_views], data.wo[:, fit_views], weights=w, normalization=NORM
+    )
+
+    def held_out_rmse(r):
+        pred = np.asarray(wj.predict_pixels(r, data.wi[:, :1], data.wo[:, :1]))
+        return np.sqrt(np.mean((pred - data.f_r[:, :1]) ** 2))
+
+    assert held_out_rmse(res) < 0.5 * held_out_rmse(flat)
