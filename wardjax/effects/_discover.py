@@ -649,15 +649,9 @@ def discover(
     stopped = run.search(search, max_steps, alpha, min_explained, structure_p, stop_within_noise, sample, progress)
     cur, states, found, steps, partial = run.cur, run.states, run.found, run.steps, run.partial
     mask, st = search.mask, cur.state
-    within = stopped or _gap_p(st.chi2, st.dof) >= structure_p
-    unexplained, structure = unexplained_structure(
-        _flat(cur.r.reshape(np.shape(cur.pred)), mask),
-        {k: _flat(x, mask) for k, x in cur.covs.items()},
-        st,
-        partial,
-        structure_p,
-        within,
-    )
+    within = stopped or _gap_p(st.chi2, st.dof) >= structure_p  # the verdict follows the gap (_verdict)
+    r_flat, covs = _flat(cur.r.reshape(np.shape(cur.pred)), mask), {k: _flat(x, mask) for k, x in cur.covs.items()}
+    unexplained, structure = unexplained_structure(r_flat, covs, st, partial, structure_p, within)
     return DiscoveryReport(
         model=getattr(model, "title", type(model).__name__),
         model_kind=model.kind,
