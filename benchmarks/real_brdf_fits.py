@@ -90,7 +90,7 @@ def _rows(source, names, f, wi, wo, weights, *, grey: bool, floor: float = 1e-4)
             p = fit.params
             pred = np.asarray(
                 wj.ward_brdf(
-                    wj.WardParams(
+                    wj.WardParams.from_estimate(
                         rho_d=p.rho_d[:, None, :],
                         rho_s=p.rho_s[:, None],
                         alpha_x=p.alpha_x[:, None],

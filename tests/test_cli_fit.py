@@ -6,6 +6,7 @@ import subprocess
 import sys
 
 import numpy as np
+import pytest
 from click.testing import CliRunner
 
 import wardjax as wj
@@ -54,6 +55,7 @@ def test_fit_missing_path_is_one_line(tmp_path):
     assert res.stderr.strip().splitlines() == [f"error: {tmp_path / 'nope'}: no such capture folder"]
 
 
+@pytest.mark.slow
 def test_fit_keeps_compiled_kernels_between_runs(tmp_path):
     """A second ``wardjax fit`` process reads the compiled kernels the first wrote, with identical results."""
     cap = tmp_path / "c"

@@ -64,6 +64,7 @@ def test_hidden_effect_parameters_recovered(reports):
     assert abs(eps - case.truth["strength"]) < 4 * rep.steps[0].stderr["eps"] + 0.01 * abs(case.truth["strength"])
 
 
+@pytest.mark.slow
 def test_absorbed_gamma_is_named_not_a_partial_match():
     """Bench γ draw 6 (ε = −0.11, 4.8 σ RMS): ρd, ρs and α absorb all but Δχ² ≈ 30 of it, so it 'explains'
     only 28 % of an excess χ² − dof that is mostly noise (SD √(2 dof) ≈ 110); with γ the gap is within the
@@ -110,6 +111,7 @@ def test_solo_fits_equal_batched_fits(reports, monkeypatch):
         )
 
 
+@pytest.mark.slow
 def test_fits_stopped_at_the_step_cap_are_continued_where_they_decide(reports):
     """With a 4-step LM cap the baseline and most candidates stop unconverged (before, the winner's ε and the
     gaps came from such fits). The baseline, the winner and the close runner-up (coloured specular, ΔBIC within
@@ -217,6 +219,7 @@ def test_curet_ward_fits_and_discover():
     assert all(r.unexplained for r in reps.values())
 
 
+@pytest.mark.slow
 def test_cli_diagnose(tmp_path):
     p = wj.WardParams(rho_d=(0.5, 0.4, 0.3), rho_s=0.05, alpha_x=0.12, alpha_y=0.12)
     wj.simulate_capture(p, tmp_path / "cap", seed=0, image_size=(160, 120), texture="none")
@@ -278,6 +281,7 @@ def test_full_bench():
     assert all(not r["found"] for r in s["rows"] if r["hidden"] in bench.CANCELLED)
 
 
+@pytest.mark.slow
 def test_twin_signatures_reported_as_not_told_apart():
     """When two candidates leave the same signature (here an exact copy of the illumination effect under
     anisotropy's name, the pair the report knows to confuse) on data with a hidden illumination field, the
@@ -387,6 +391,7 @@ def halves():
     return full, dataclasses.replace(full, y=y)
 
 
+@pytest.mark.slow
 def test_an_effect_present_throughout_predicts_held_out_scanlines(halves):
     rep = discover(ScanlineModel(), halves[0])
     assert rep.found == ["gamma"]

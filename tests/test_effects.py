@@ -211,6 +211,7 @@ def test_flagged_clipped_values_are_censored_not_dropped():
         scanline_data(y, d.wi, d.wo, d.sigma, censored=flags[:, :5])
 
 
+@pytest.mark.slow
 def test_capture_clipped_probe_pixels_are_censored_not_dropped(tmp_path):
     """On a capture whose highlight clips (the standard does not), diagnose's data keep the clipped probe pixels
     as censored lower bounds (they were dropped, so the saturation effect could never apply to a capture), the

@@ -4,11 +4,13 @@ import time
 from pathlib import Path
 
 import nbformat
+import pytest
 from nbclient import NotebookClient
 
 NOTEBOOK = Path(__file__).parents[1] / "notebooks" / "missing_effects.ipynb"
 
 
+@pytest.mark.slow
 def test_missing_effects_notebook_runs():
     nb = nbformat.read(NOTEBOOK, as_version=4)
     t0 = time.perf_counter()

@@ -387,6 +387,7 @@ class _Compiles:
         self._logger.setLevel(self._level)
 
 
+@pytest.mark.slow
 def test_captures_of_one_rig_share_every_compiled_program_of_the_fit(tmp_path, monkeypatch):
     # Not only the reconstruction: the texture bands, the per-scanline and joint fits, the texture-field
     # errors and the diagnostics all see shapes padded to _shapes.bucket (padded samples at zero weight),

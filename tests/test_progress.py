@@ -76,6 +76,7 @@ def _stage_names(stderr: str) -> list[str]:
     return [m["name"] for m in _lines(stderr)]
 
 
+@pytest.mark.slow
 def test_diagnose_shows_every_stage(capture):
     r = CliRunner().invoke(
         main, ["diagnose", str(capture / "caps" / "plain"), "--out", str(capture / "diag"), "--progress"]
