@@ -126,6 +126,23 @@ def _joint_residual(y, a: _JointArgs, iso: bool):
     return jnp.sqrt(jnp.broadcast_to(a.w, a.f.shape)) * r
 
 
+def _no_data(n_scan: int, k: int, model: str, normalization: str) -> CombinedFit:
+    """The joint fit of scanlines none of which has usable data: NaN, status ``INSUFFICIENT_DATA``."""
+    nan = WardParams.from_estimate(rho_d=np.full(3, np.nan), rho_s=np.nan, alpha_x=np.nan, alpha_y=np.nan)
+    return CombinedFit(
+        nan,
+        nan,
+        np.full((n_scan, 3), np.nan),
+        np.full((k + 1, k + 1), np.nan),
+        float("nan"),
+        0,
+        Status.INSUFFICIENT_DATA,
+        0,
+        model,
+        normalization,
+    )
+
+
 def combined(
     data: tuple, scan_status: np.ndarray, normalization: str, model: str, *, errors: str, max_steps: int, rtol: float
 ) -> CombinedFit:
@@ -152,19 +169,7 @@ def combined(
     use = np.all(np.sum(wfull > 0, axis=1) >= 3, axis=-1) & (scan_status != Status.NONFINITE)
     n_use = int(np.sum(use))
     if n_use == 0:
-        nan = WardParams.from_estimate(rho_d=np.full(3, np.nan), rho_s=np.nan, alpha_x=np.nan, alpha_y=np.nan)
-        return CombinedFit(
-            nan,
-            nan,
-            np.full((len(scan_status), 3), np.nan),
-            np.full((k + 1, k + 1), np.nan),
-            float("nan"),
-            0,
-            Status.INSUFFICIENT_DATA,
-            0,
-            model,
-            normalization,
-        )
+        return _no_data(len(scan_status), k, model, normalization)
     # Pad the scanline axis to a bucket size with zero-weight rows: one compile per bucket.
     rows = bucket_rows(n_use, 1 << 30)
     sel = [np.asarray(a)[use] for a in (f_c, wi_c, wo_c, w_c)]

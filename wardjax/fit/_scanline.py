@@ -200,6 +200,13 @@ def _fast_chunk(f, wi, wo, mask, weights, n, *, iso, rtol, normalization, dtype,
     return _sandwich_chunk(sol, *parts) if sandwich else sol
 
 
+def _steps(max_steps) -> int | None:
+    """``max_steps`` checked at the boundary: ``None`` (the kernel's default) or a positive integer."""
+    if max_steps is not None and not (isinstance(max_steps, int | np.integer) and max_steps >= 1):
+        raise ValueError(f"max_steps must be a positive integer, got {max_steps!r}")
+    return None if max_steps is None else int(max_steps)
+
+
 def fit_scanlines(
     f_r,
     wi,
@@ -252,19 +259,14 @@ def fit_scanlines(
         over a 1-D mesh, scanline axis); default ``jax.devices()``. Scanlines
         are independent, so the results do not depend on the devices.
     errors
-        Standard errors (fast solver): ``"auto"`` (default) reports the Gauss–Newton
-        ones with weights and the sandwich (heteroscedasticity-consistent) ones
-        without, and, for isotropic fits, the profile-likelihood ones of ρs and α
-        where the curvature check fails (χ² one standard error away does not rise
-        as a quadratic would, within 20 %); ``"gauss_newton"`` reports Gauss–Newton
-        errors only, with or without weights (no check, no sandwich: the fastest);
-        ``"profile"`` profiles every converged isotropic fit.
+        Standard errors (fast solver): ``"auto"`` (default) reports Gauss–Newton ones with weights and the sandwich
+        (heteroscedasticity-consistent) ones without, and for isotropic fits the profile-likelihood ones of ρs and α
+        where the curvature check fails (χ² one standard error away off a quadratic's rise by over 20 %);
+        ``"gauss_newton"``: Gauss–Newton only (the fastest); ``"profile"``: every converged isotropic fit profiled.
         :attr:`ScanlineFit.errors` says which each fit reports.
     max_steps
-        Levenberg–Marquardt steps after the grid start (fast solver; default
-        4, the anisotropic fit 8 more). A scanline whose last step still moved
-        its α by more than the tolerance gets status ``max_steps``: its
-        parameters are the best point found, not certified a minimum.
+        LM steps after the grid start (fast solver; default 4, anisotropic 8 more). A scanline still moving at the
+        limit gets status ``max_steps``: its parameters are the best point found, not certified a minimum.
 
     Notes
     -----
@@ -298,10 +300,7 @@ def fit_scanlines(
     check = errors == "auto"
     # Without weights the residual variance is unknown and may follow the signal: the sandwich.
     sandwich = weights is None and errors != "gauss_newton" and solver == "fast"
-    if max_steps is not None and not (isinstance(max_steps, int | np.integer) and max_steps >= 1):
-        raise ValueError(f"max_steps must be a positive integer, got {max_steps!r}")
-    steps = None if max_steps is None else int(max_steps)
-    sol = _solve(data, dtype=dtype, chunk=chunk, check=check, sandwich=sandwich, steps=steps, **kw)
+    sol = _solve(data, dtype=dtype, chunk=chunk, check=check, sandwich=sandwich, steps=_steps(max_steps), **kw)
     if dtype == np.float32 and solver == "fast":
         # A float32 fit that is not certified (rounding can cancel the
         # algebraic centring into a spurious optimum: ~3 in 10⁴ scanlines with

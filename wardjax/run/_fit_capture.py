@@ -180,6 +180,11 @@ def fit_capture(
         raise CaptureError(CAPTURE_FILE, "method", f"hold_out needs a photograph capture, got {cap.method!r}")
     if cap.method != "scanline":  # the smartphone method dispatches in wardjax.run
         raise CaptureError(CAPTURE_FILE, "method", f"fit_capture fits method = 'scanline', got {cap.method!r}")
+    return _fit_scanline_capture(cap, max_fit_samples=max_fit_samples, band_rows=band_rows, max_steps=max_steps)
+
+
+def _fit_scanline_capture(cap, *, max_fit_samples: int, band_rows: int, max_steps: int | None):
+    """The image-based method's fit of :func:`fit_capture`: reconstruction, scanline fits, joint refit, texture."""
     cfg = cap.config
     norm = cfg.fit.normalization
     tangent = cap.tangent
