@@ -5,7 +5,7 @@ synthesize``, ``diagnose``, ``gratings``) and the public loaders are driven
 with broken inputs of each kind: outputs that cannot be written, impossible
 values, images that do not belong together, wrong types (a folder for a file,
 a boolean for a number), truncated files. The rules are those of
-:mod:`wardjax.capture._rules`, shared by the CLI, ``capture.toml`` and the
+:mod:`wardjax._rules`, shared by the CLI, ``capture.toml`` and the
 Python API; the expected refusals here are written from the physics (ρd in
 [0, 1], ρd + ρs ≤ 1, α > 0, a lens's field of view), not read off the code.
 """
@@ -625,7 +625,7 @@ def test_a_colour_correction_that_failed_is_refused():
     what to check. With no patch held out, the error cannot be estimated: refused too."""
     import tomllib
 
-    from wardjax.capture._rules import MAX_HELD_OUT_DELTA_E, check_camera_correction
+    from wardjax._rules import MAX_HELD_OUT_DELTA_E, check_camera_correction
     from wardjax.smartphone import (
         colorchecker_held_out_delta_E,
         colorchecker_patch_regions,

@@ -8,7 +8,7 @@ sizes, kinds of file, mismatched lit/dark pairs), ``texture.json``/``.npz``
 and the command line's argument parsers.
 
 The property, for every generated input: it loads — and then what was read
-lies within the rules of :mod:`wardjax.capture._rules` — or it is refused with
+lies within the rules of :mod:`wardjax._rules` — or it is refused with
 the project's error (:class:`~wardjax.capture.CaptureError`, the
 ``ValueError`` of the texture loader, the CLI's ``error:`` line) on one line
 naming the file or field; never another exception, never a traceback, never
@@ -40,8 +40,8 @@ from hypothesis import strategies as st
 from hypothesis.database import DirectoryBasedExampleDatabase
 
 import wardjax as wj
+from wardjax._rules import MAX_DISTANCE_MM
 from wardjax.capture import CaptureError, RuleError, check_focal_px, load_capture, one_line
-from wardjax.capture._rules import MAX_DISTANCE_MM
 from wardjax.capture._setup import load_display
 from wardjax.texture import TextureModel
 

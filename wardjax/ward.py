@@ -150,7 +150,7 @@ _CHECKED: contextvars.ContextVar[bool] = contextvars.ContextVar("wardjax_ward_pa
 class WardParams(eqx.Module):
     """Ward BRDF parameters, a pytree that ``jit``, ``vmap`` and ``grad`` accept.
 
-    Construction refuses the impossible (``wardjax.capture._rules.check_ward_arrays``):
+    Construction refuses the impossible (``wardjax._rules.check_ward_arrays``):
     a non-finite leaf, ρd outside [0, 1], ρs < 0, ρd + ρs > 1 in a channel (energy
     conservation, image-based paper eq. 1), α ≤ 0, raising ``RuleError`` (a
     ``ValueError``) naming the field. Values traced under ``jit``, ``vmap`` or ``grad``

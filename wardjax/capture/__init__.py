@@ -27,16 +27,16 @@ from ._photo_schema import MultiviewFile as MultiviewFile
 from ._vignetting import Vignetting as Vignetting
 from ._vignetting import fit_vignetting as fit_vignetting
 from ._import import import_capture as import_capture
-from ._rules import MAX_CLIPPED_FRACTION as MAX_CLIPPED_FRACTION
-from ._rules import RuleError as RuleError
-from ._rules import check_focal_px as check_focal_px
-from ._rules import check_image_pair as check_image_pair
-from ._rules import check_lit_exposure as check_lit_exposure
-from ._rules import check_photo_region as check_photo_region
-from ._rules import check_position as check_position
-from ._rules import check_rho_d_map as check_rho_d_map
-from ._rules import check_ward_params as check_ward_params
-from ._rules import one_line as one_line
+from .._rules import MAX_CLIPPED_FRACTION as MAX_CLIPPED_FRACTION
+from .._rules import RuleError as RuleError
+from .._rules import check_focal_px as check_focal_px
+from .._rules import check_image_pair as check_image_pair
+from .._rules import check_lit_exposure as check_lit_exposure
+from .._rules import check_photo_region as check_photo_region
+from .._rules import check_position as check_position
+from .._rules import check_rho_d_map as check_rho_d_map
+from .._rules import check_ward_params as check_ward_params
+from .._rules import one_line as one_line
 
 __all__ = [
     "CAPTURE_FILE",

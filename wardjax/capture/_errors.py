@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pydantic
 
-from ._rules import one_line, shorten
+from .._rules import one_line, shorten
 
 __all__ = ["CAPTURE_FILE", "CaptureError", "pydantic_error"]
 

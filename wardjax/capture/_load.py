@@ -9,12 +9,12 @@ from pathlib import Path
 import numpy as np
 
 from .._files import RAW_SUFFIXES, decode_lut, file_problem, sha256
+from .._rules import RuleError, check_image_pair, check_lit_exposure
 from ..geometry import Camera, Rig
 from ._errors import CAPTURE_FILE, CaptureError
 from ._images import CaptureImages, ImageSource, Window, open_image
 from ._photo import PhotoCapture, load_photo_capture
 from ._photo_schema import FlashFile, MultiviewFile
-from ._rules import RuleError, check_image_pair, check_lit_exposure
 from ._schema import CaptureFile, parse_capture_file, unit_direction
 from ._smartphone import SmartphoneCapture, check_relative, load_smartphone_capture
 

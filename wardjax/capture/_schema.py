@@ -64,9 +64,9 @@ import pydantic
 from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, Strict
 
 from .._files import file_problem
+from .._rules import LIMITS, RuleError, check_count, check_focal_px, check_position
 from ._errors import CAPTURE_FILE, CaptureError, pydantic_error
 from ._photo_schema import FlashFile, MultiviewFile, parse_photo_file
-from ._rules import LIMITS, RuleError, check_count, check_focal_px, check_position
 from ._smartphone import SmartphoneCaptureFile, parse_smartphone_file
 
 __all__ = ["CaptureFile", "parse_capture_file", "unit_direction"]

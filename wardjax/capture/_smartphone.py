@@ -65,8 +65,8 @@ import pydantic
 from pydantic import BaseModel, ConfigDict, Field, Strict
 
 from .._files import file_problem, read_image, sha256
+from .._rules import LIMITS, RuleError, check_photo_region
 from ._errors import CAPTURE_FILE, CaptureError, pydantic_error
-from ._rules import LIMITS, RuleError, check_photo_region
 from ._setup import load_display, load_viewing
 
 __all__ = [

@@ -32,8 +32,8 @@ import numpy as np
 import pydantic
 from pydantic import BaseModel, ConfigDict, Field, Strict
 
+from .._rules import shorten
 from ..capture._errors import pydantic_error
-from ..capture._rules import shorten
 
 __all__ = ["MAX_INPUT_BYTES", "validate_fit_folder", "validate_fits_dir"]
 

@@ -21,8 +21,9 @@ import dataclasses
 import numpy as np
 
 from .. import _shapes
+from .._rules import MAX_CLIPPED_FRACTION
 from .._status import Status
-from ..capture import CAPTURE_FILE, MAX_CLIPPED_FRACTION, Capture, CaptureError
+from ..capture import CAPTURE_FILE, Capture, CaptureError
 from ..export import RADIANCE_NORMALIZATION
 from ..fit import CombinedFit, ScanlineFit, fit_scanlines, texture_field_covariance, with_texture_errors
 from ..fit._texture_field import lobe

@@ -22,8 +22,8 @@ from pathlib import Path
 import numpy as np
 
 from .._files import encode_image, staged_folder, write_bytes_atomic, write_image, write_json_atomic
-from ..capture import CAPTURE_FILE, Capture, check_ward_params, load_capture
-from ..capture._rules import check_count, check_memory
+from .._rules import check_count, check_memory, check_ward_params
+from ..capture import CAPTURE_FILE, Capture, load_capture
 from ..export import RADIANCE_NORMALIZATION
 from ..geometry import Camera, Rig, project
 from ..ward import WardParams

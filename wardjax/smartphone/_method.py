@@ -8,7 +8,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..capture import check_photo_region, load_display, load_viewing
+from .._rules import check_photo_region
+from ..capture import load_display, load_viewing
 from ..ward import WardParams
 from ._alpha_model import AlphaModel
 from ._alpha_posterior import _as_thresholds

@@ -7,7 +7,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
-from ..capture._rules import check_rho_sum
+from .._rules import check_rho_sum
 from ._histogram import quantile_probabilities
 from ._jit import texture_jit
 from ._model import TextureModel

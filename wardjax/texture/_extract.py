@@ -11,7 +11,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..capture._rules import RuleError
+from .._rules import RuleError
 from ..ward import (
     NORMALIZATIONS,
     WardParams,

@@ -8,8 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from .._files import check_regular_file, npy_header, srgb8, write_image
-from ..capture import check_rho_d_map
-from ..capture._rules import RuleError, check_count, check_memory, one_line, shorten
+from .._rules import RuleError, check_count, check_memory, check_rho_d_map, one_line, shorten
 
 
 def write_texture_image(path, image) -> Path:

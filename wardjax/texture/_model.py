@@ -10,7 +10,7 @@ import equinox as eqx
 import numpy as np
 
 from .._files import atomic_path, file_problem, write_json_atomic
-from ..capture import one_line
+from .._rules import one_line
 from ._pyramid import (
     ORIENTATIONS,
 )
