@@ -38,6 +38,7 @@ __all__ = [
     "check_regular_file",
     "check_writable_dir",
     "check_writable_file",
+    "COMMIT_JOURNAL",
     "commit_folder",
     "decode_image",
     "decode_lut",
@@ -49,6 +50,7 @@ __all__ = [
     "jsonable",
     "npy_header",
     "read_image",
+    "recover_commit",
     "remove_temporaries",
     "sha256",
     "srgb8",
@@ -175,6 +177,10 @@ def staged_folder(dest) -> Iterator[Path]:
         shutil.rmtree(staging, ignore_errors=True)
 
 
+# The journal :func:`commit_folder` keeps in its destination while it moves files in.
+COMMIT_JOURNAL = ".wardjax-commit.json"
+
+
 def commit_folder(staging, dest, *, last: str) -> None:
     """Move the files of the flat folder ``staging`` into ``dest`` (made if missing), ``last`` last; drop ``staging``.
 
@@ -184,8 +190,17 @@ def commit_folder(staging, dest, *, last: str) -> None:
     ``dest`` is replaced only if ``dest`` holds an earlier fit (a ``last`` that
     wardjax wrote); otherwise it is not ours, and ``ValueError`` names it
     before anything is moved.
+
+    While the files move, ``dest`` holds a journal (:data:`COMMIT_JOURNAL`: the
+    names being moved, the digest of ``last``), written atomically before the
+    first move and removed after the last. A process killed between the two
+    leaves it behind, and :func:`recover_commit` (called here first, and by a
+    batch before it looks at ``dest``) reads from it what the half-done move
+    left: the names it lists are wardjax's, so they are removed, never refused
+    as someone else's files.
     """
     staging, dest = Path(staging), Path(dest)
+    recover_commit(dest)
     names = sorted(p.name for p in staging.iterdir() if p.is_file())
     ours = _wardjax_folder(dest / last)  # an earlier fit's outputs, replaced by this one's
     for name in names:
@@ -196,9 +211,41 @@ def commit_folder(staging, dest, *, last: str) -> None:
                 "(choose an output folder of its own)"
             )
     dest.mkdir(parents=True, exist_ok=True)
+    digest = sha256(staging / last) if last in names else None
+    write_json_atomic(dest / COMMIT_JOURNAL, {"names": names, "last": last, "last_sha256": digest})
     for name in sorted(names, key=lambda n: n == last):
         os.replace(staging / name, dest / name)
+    os.unlink(dest / COMMIT_JOURNAL)
     shutil.rmtree(staging)
+
+
+def recover_commit(dest) -> bool:
+    """Settle a :func:`commit_folder` that was killed while it moved files into ``dest``; ``True`` if there was one.
+
+    With ``last`` in ``dest`` and its digest the journal's, every file had
+    moved: only the journal is removed. Otherwise the move stopped part way,
+    and ``dest`` mixes the new files with the old (or holds only some of the
+    new): every file the journal names is removed with it, so that ``dest``
+    holds no finished result and the next run writes it afresh. The names
+    were checked to be wardjax's own before the journal was written.
+    """
+    dest = Path(dest)
+    journal = dest / COMMIT_JOURNAL
+    if not journal.is_file():
+        return False
+    try:
+        doc = json.loads(journal.read_text())
+        names, last, digest = list(doc["names"]), str(doc["last"]), doc["last_sha256"]
+    except (OSError, ValueError, KeyError, TypeError):  # written atomically: only a foreign file reads wrong
+        names, last, digest = [], "", None
+    done = digest is not None and (dest / last).is_file() and sha256(dest / last) == digest
+    if not done:
+        for name in names:
+            target = dest / str(name)
+            if target.parent == dest and (target.is_file() or target.is_symlink()):
+                target.unlink()
+    journal.unlink()
+    return True
 
 
 def _wardjax_folder(record: Path) -> bool:

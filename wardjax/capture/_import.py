@@ -31,7 +31,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .._files import commit_folder, write_bytes_atomic
+from .._files import commit_folder, recover_commit, write_bytes_atomic
 from ._errors import CAPTURE_FILE, CaptureError
 from ._photo import PhotoCapture
 
@@ -127,6 +127,8 @@ def import_capture(
         raise ValueError(f"units={units!r}: expected one of {', '.join(MM_PER_UNIT)}")
     if not src.is_dir():
         raise CaptureError(str(src), None, "not a folder")
+    if out.is_dir():
+        recover_commit(out)  # an import killed while it moved its files in: they go, and it runs again
     if out.exists() and (not out.is_dir() or any(out.iterdir())):
         raise CaptureError(str(out), None, "exists and is not an empty folder; choose another --out")
     images = _images(src)

@@ -33,7 +33,7 @@ import traceback
 from collections.abc import Callable
 from pathlib import Path
 
-from .._files import commit_folder, remove_temporaries, sha256, write_bytes_atomic
+from .._files import commit_folder, recover_commit, remove_temporaries, sha256, write_bytes_atomic
 from ..capture import CAPTURE_FILE, CaptureError, load_capture
 from ..export import write_capture_outputs
 from ._fit_capture import fit_capture
@@ -154,6 +154,21 @@ def check_outputs_apart(captures: list[Path], names: list[str], out) -> None:
                     f"{'is' if dest == src else 'overlaps'} the capture folder {given}; "
                     "choose an output folder outside every capture folder"
                 )
+
+
+def check_out_outside(capture, out) -> None:
+    """Refuse an output folder that is, or lies inside, the capture folder ``capture`` (``wardjax diagnose --out``).
+
+    Its files (``report.json``, ``report.md``, the PNGs) are written straight into ``out``, under
+    names a capture folder may hold; a folder that holds the capture cannot collide with it.
+    """
+    out, capture = Path(out), Path(capture)
+    dest, src = out.resolve(), capture.resolve()
+    if dest == src or dest.is_relative_to(src):
+        raise ValueError(
+            f"--out {out}: {'is' if dest == src else 'lies inside'} the capture folder {capture}; "
+            "choose an output folder outside it"
+        )
 
 
 def _names(captures: list[Path]) -> list[str]:
@@ -323,7 +338,8 @@ def fit_one(
     ``force``). The outputs are written into a staging folder of this attempt
     (``out/.<name>.<token>.partial``) and committed with ``params.json`` last,
     so a killed attempt leaves no file in ``out/<name>/`` and its rerun (a
-    retried task) starts afresh from what it left; a capture an earlier
+    retried task) starts afresh from what it left (one killed while the files
+    moved is settled by the commit's journal, :func:`~wardjax._files.recover_commit`); a capture an earlier
     attempt of *this* batch (same ``created``) already committed is not
     written again.
 
@@ -335,6 +351,7 @@ def fit_one(
     """
     out_dir = out / name
     remove_temporaries(out_dir)
+    recover_commit(out_dir)  # a kill during an earlier commit's moves: its half-moved files go, then it reruns
     for stale in out.glob(f".{glob.escape(name)}.*partial"):  # what a killed attempt left behind
         if _STAGING.fullmatch(stale.name[len(name) + 1 :]):
             shutil.rmtree(stale, ignore_errors=True)
