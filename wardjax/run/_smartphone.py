@@ -6,6 +6,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .._rules import RuleError, check_camera_correction
 from ..capture import CAPTURE_FILE, CaptureError, SmartphoneCapture
 from ..export import write_smartphone_outputs
 from ..smartphone import chart_correction, fit_smartphone
@@ -35,6 +36,10 @@ def fit_smartphone_capture(cap: SmartphoneCapture, out_dir: Path, *, created: st
                 degree=cc.degree,
                 terms=cc.terms,
             )
+            # a correction whose held-out ΔE says it failed (a grey photo, a reversed layout) is not applied
+            check_camera_correction(cfg.photo.file, chart.delta_E_held_out[chart.usable])
+        except RuleError as e:
+            raise CaptureError(CAPTURE_FILE, "color_correction", e.message) from None
         except ValueError as e:  # too few usable patches for the method's terms
             raise CaptureError(CAPTURE_FILE, "color_correction", str(e).splitlines()[0]) from None
     try:

@@ -192,6 +192,11 @@ class CameraCorrection:
         return np.asarray(out)
 
 
+# The tone exponents a decoded camera photo can need (1: the decoding was right). Outside them the grey patches
+# do not show the chart's white-to-black ramp, and the correction built on the exponent would overflow.
+_TONE_EXPONENTS = (0.2, 5.0)
+
+
 def _tone_exponent(x: NDArray, ref_rgb: NDArray, reference_Lab: NDArray) -> float:
     """γ of ``Y_ref ∝ Y(ρd)^γ``, by a log–log line through the chart's neutral patches."""
     neutral = np.hypot(reference_Lab[:, 1], reference_Lab[:, 2]) < _NEUTRAL_CHROMA
@@ -199,7 +204,18 @@ def _tone_exponent(x: NDArray, ref_rgb: NDArray, reference_Lab: NDArray) -> floa
         raise ValueError(f"the tone exponent needs ≥ 2 neutral patches (C*ab < {_NEUTRAL_CHROMA}); got {neutral.sum()}")
     y_cam = np.asarray(luminance_from_rho_d(x[neutral]))
     y_ref = np.asarray(luminance_from_rho_d(ref_rgb[neutral]))
-    return float(np.polyfit(np.log(y_cam), np.log(y_ref), 1)[0])
+    if np.ptp(np.log(y_cam)) < 1e-3:  # the chart runs from white to black: one level is no photo of it
+        raise ValueError(
+            f"the chart's {int(neutral.sum())} grey patches all read one level (Y = {float(np.mean(y_cam)):.3g}); "
+            "the tone curve cannot be fitted: check the chart photo and the patch layout"
+        )
+    gamma = float(np.polyfit(np.log(y_cam), np.log(y_ref), 1)[0])
+    if not _TONE_EXPONENTS[0] <= gamma <= _TONE_EXPONENTS[1]:
+        raise ValueError(
+            f"the chart's grey patches give a tone exponent of {gamma:.3g}; a decoded photo's lies near 1 "
+            f"({_TONE_EXPONENTS[0]:g} to {_TONE_EXPONENTS[1]:g} allowed): check the chart photo and the patch layout"
+        )
+    return gamma
 
 
 def fit_camera_correction(

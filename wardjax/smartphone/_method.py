@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .._rules import check_photo_region
+from .._rules import check_camera_correction, check_photo_region
 from ..capture import load_display, load_viewing
 from ..ward import WardParams
 from ._alpha_model import AlphaModel
@@ -62,6 +62,8 @@ def fit_smartphone(
     chart
         A camera correction fitted on a ColorChecker (``chart_correction``): ρd is
         corrected by it, and its held-out error joins ρd's σ (``rho_d_color_sigma``).
+        One whose median held-out ΔE*ab exceeds ``MAX_HELD_OUT_DELTA_E`` (10) failed
+        (a uniform grey photo, patches read in the wrong order) and is refused.
 
     Returns
     -------
@@ -79,7 +81,8 @@ def fit_smartphone(
     Raises
     ------
     ValueError
-        :class:`~wardjax.capture.RuleError` when over half the region is black or clipped in a channel.
+        :class:`~wardjax.capture.RuleError` when over half the region is black or clipped in a channel,
+        or when ``chart``'s held-out ΔE*ab says the correction failed (``check_camera_correction``).
     """
     photo = np.asarray(photo_rgb)
     y0, y1, x0, x1 = region
@@ -88,6 +91,7 @@ def fit_smartphone(
     rho_d, rho_d_se = diffuse_from_srgb(photo_rgb, region, decoding=decoding, return_stderr=True)
     rho_d_color = np.zeros(3)
     if chart is not None:
+        check_camera_correction("chart", chart.delta_E_held_out[chart.usable])  # a failed correction is refused
         rho_d, rho_d_se = _corrected(chart, rho_d, rho_d_se)
         rho_d_color = rho_d_color_sigma(rho_d, chart.held_out_Lab)
     rho_s = specular_from_fresnel(n)
