@@ -21,6 +21,7 @@ import numpy as np
 import pytest
 import tifffile
 import tomli_w
+from _captures import phone_capture
 from click.testing import CliRunner
 
 import wardjax as wj
@@ -41,22 +42,6 @@ BAD_TEXT = ("Value error,", "internal error", "capture.toml: capture.toml", "Tra
 def good(tmp_path_factory) -> Path:
     folder = tmp_path_factory.mktemp("good") / "cap"
     wj.simulate_capture(PROBE, folder, seed=3, image_size=(64, 48))
-    return folder
-
-
-def _phone(folder: Path, photo=None, **edits) -> Path:
-    """A smartphone capture (Table 1b's NCS white, gloss 50) with ``section__field`` edits."""
-    folder.mkdir(parents=True, exist_ok=True)
-    iio.imwrite(folder / "photo.png", np.full((96, 128, 3), 237, np.uint8) if photo is None else photo)
-    cfg = {
-        "method": "smartphone",
-        "photo": {"file": "photo.png", "region": [20, 80, 30, 100]},
-        "thresholds": {"ppb": [10, 11, 12]},
-    }
-    for key, value in edits.items():
-        section, _, field = key.partition("__")
-        cfg.setdefault(section, {})[field] = value
-    (folder / "capture.toml").write_text(tomli_w.dumps(cfg))
     return folder
 
 
@@ -250,7 +235,7 @@ PHONE_BAD = {
 def test_smartphone_toml_wrong_values(tmp_path, case):
     edits, field = PHONE_BAD[case]
     edits = dict(edits)
-    folder = _phone(tmp_path / "caps" / "phone")
+    folder = phone_capture(tmp_path / "caps" / "phone")
     cfg = tomllib.loads((folder / "capture.toml").read_text())
     for key, value in edits.items():
         section, _, name = key.partition("__")
@@ -348,7 +333,7 @@ def test_images_that_do_not_belong_together(good, tmp_path, case):
 def test_smartphone_clipped_region_is_never_a_converged_fit(tmp_path, code):
     photo = np.full((96, 128, 3), 120, np.uint8)
     photo[20:80, 30:100, 0] = code  # red clipped over the region: ρd_R would be exactly 0 or 1 "± 0"
-    folder = _phone(tmp_path / "caps" / "phone", photo=photo)
+    folder = phone_capture(tmp_path / "caps" / "phone", photo=photo)
     word = "black" if code == 0 else "saturated"
     with pytest.raises(CaptureError, match=word):
         load_capture(folder)
@@ -370,7 +355,7 @@ def test_folders_given_for_files(good, tmp_path, texture_model):
     (cap / "lit.png").unlink()
     (cap / "lit.png").mkdir()
     _refused(["fit", str(cap), "--out", str(tmp_path / "o2"), "--quiet"], "lit.png", contains="is a folder")
-    phone = _phone(tmp_path / "caps" / "c")
+    phone = phone_capture(tmp_path / "caps" / "c")
     (phone / "photo.png").unlink()
     (phone / "photo.png").mkdir()
     _refused(["fit", str(phone), "--out", str(tmp_path / "o3"), "--quiet"], "photo.png", contains="is a folder")
@@ -421,7 +406,7 @@ def test_truncated_files(good, tmp_path, texture_model):
     text = (cap / "capture.toml").read_text()
     (cap / "capture.toml").write_text(text[: text.index("[camera]") + 4])
     _refused(["fit", str(cap), "--out", str(tmp_path / "o2"), "--quiet"], "capture.toml")
-    phone = _phone(tmp_path / "caps" / "c")
+    phone = phone_capture(tmp_path / "caps" / "c")
     data = (phone / "photo.png").read_bytes()
     (phone / "photo.png").write_bytes(data[:100])
     _refused(["fit", str(phone), "--out", str(tmp_path / "o3"), "--quiet"], "photo.png", contains="cannot be read")

@@ -42,12 +42,13 @@ from typing import NamedTuple
 import numpy as np
 import pytest
 import tifffile
-import tomli_w
 from click.testing import CliRunner
 
 HERE = Path(__file__).resolve().parent
 if str(HERE) not in sys.path:  # run as a script: the fixtures' helpers below
     sys.path.insert(0, str(HERE))
+
+from _captures import phone_capture  # noqa: E402
 
 import wardjax as wj  # noqa: E402
 from wardjax.capture import RuleError  # noqa: E402
@@ -600,24 +601,9 @@ def _sim_capture(root: Path, name="a") -> Path:
 
 def _phone_capture(root: Path, name="p", **edits) -> Path:
     """A smartphone capture (a near-white photo, three observers) with ``section__field`` edits."""
-    import imageio.v3 as iio
-
-    folder = root / "caps" / name
-    folder.mkdir(parents=True)
     rng = np.random.default_rng(0)
-    iio.imwrite(folder / "photo.png", np.clip(rng.normal(200, 3, (96, 128, 3)), 0, 255).astype(np.uint8))
-    cfg: dict = {
-        "method": "smartphone",
-        "photo": {"file": "photo.png", "region": [20, 80, 30, 100]},
-        "thresholds": {"ppb": [10, 11, 12]},
-    }
-    for key, value in edits.items():
-        section, _, field = key.partition("__")
-        cfg.setdefault(section, {})[field] = value
-    if "ppb_mean" in cfg["thresholds"]:  # one form of the thresholds or the other
-        cfg["thresholds"].pop("ppb")
-    (folder / "capture.toml").write_text(tomli_w.dumps(cfg))
-    return folder
+    photo = np.clip(rng.normal(200, 3, (96, 128, 3)), 0, 255).astype(np.uint8)
+    return phone_capture(root / "caps" / name, photo, **edits)
 
 
 def _edit_scan(folder: Path, section: str, field: str, value) -> None:
@@ -634,8 +620,112 @@ def _fit(paths, out: Path) -> list[str]:
     return ["fit", *map(str, paths), "--out", str(out), "--quiet"]
 
 
-def _fit_cases() -> list[Case]:
+def _run(command: str, cap: Path, r: Path) -> list[str]:
+    """``wardjax fit CAP --out r/fits`` or ``wardjax diagnose CAP --out r/diagnose``."""
+    if command == "fit":
+        return _fit([cap], r / "fits")
+    return ["diagnose", str(cap), "--out", str(r / "diagnose")]
+
+
+def _with_special(r: Path, make: Callable[[Path], Path], file: str, kind: str) -> Path:
+    """A capture made by ``make`` whose ``file`` is replaced by a path of ``kind`` (:func:`_special`)."""
+    cap = make(r)
+    (cap / file).unlink()
+    _special(cap, kind, file)
+    return cap
+
+
+def _lit_codes(r: Path, edit: Callable[[np.ndarray], np.ndarray]) -> Path:
+    """The simulated capture with its lit image's codes replaced by ``edit(codes)``."""
+    import imageio.v3 as iio
+
+    cap = _sim_capture(r)
+    codes = iio.imread(cap / "lit.png")
+    iio.imwrite(cap / "lit.png", np.clip(edit(codes.astype(np.int64)), 0, 255).astype(np.uint8))
+    return cap
+
+
+_NOISE = np.random.default_rng(7)
+# Lit images with nothing of the rig to measure, and the line each is refused with (on lit.png).
+LIT_EDITS: dict[str, tuple[Callable[[np.ndarray], np.ndarray], str]] = {
+    "random-noise": (lambda c: _NOISE.integers(0, 256, c.shape), "holds no picture"),
+    "grey-noise": (lambda c: np.round(128 + 10 * _NOISE.standard_normal(c.shape)), "holds no picture"),
+    "black": (lambda c: np.zeros_like(c), "black"),
+    "one-value": (lambda c: np.full_like(c, 90), "single value"),
+    "all-saturated": (lambda c: np.full_like(c, 255), "saturated"),
+    "probe-saturated": (lambda c: 8 * c, "of the probe's pixels are saturated"),
+}
+
+
+def _capture_cases(command: str) -> list[Case]:
+    """Broken scanline captures ``wardjax fit`` and ``wardjax diagnose`` must both refuse, with the same line."""
     cases = []
+    # image files that are not regular files, or not what capture.toml says
+    for make, file, kinds in (
+        (_sim_capture, "lit.png", ("fifo", "urandom", "folder", "broken-link")),
+        (_sim_capture, "capture.toml", ("fifo", "urandom", "folder")),
+        (_phone_capture, "photo.png", ("fifo", "urandom") if command == "fit" else ()),
+    ):
+        for kind in kinds:
+            cases.append(
+                Case(
+                    f"{command}-{file.split('.')[0].replace('capture', 'toml')}-{kind}",
+                    command,
+                    "misleading messages",
+                    lambda r, m=make, f=file, k=kind: _run(command, _with_special(r, m, f, k), r),
+                    "refused",
+                    SPECIAL_NAMED[kind],
+                )
+            )
+    cases.append(
+        Case(
+            f"{command}-capture-long-name",
+            command,
+            "misleading messages",
+            lambda r: _run(command, r / ("c" * 300), r),
+            "refused",
+            "255",
+        )
+    )
+    # capture.toml fields that set the work, or leave nothing to measure
+    for label, section, field, value, named, kind in (
+        ("smooth-standard-px-1e+06", "fit", "smooth_standard_px", 1e6, "smooth_standard_px", "unbounded work"),
+        ("smooth-standard-px-65", "fit", "smooth_standard_px", 65.0, "smooth_standard_px", "unbounded work"),
+        ("smooth-standard-px-1e+300", "fit", "smooth_standard_px", 1e300, "smooth_standard_px", "unbounded work"),
+        ("image-size-huge", "camera", "image_size", [100_000, 100_000], "image_size", "unbounded work"),
+        (
+            "probe-out-of-view",
+            "regions",
+            "probe",
+            [3000.0, 3100.0, -150.0, 150.0],
+            "sees the probe",
+            "impossible values",
+        ),
+    ):
+
+        def edited(r: Path, section=section, field=field, value=value) -> list[str]:
+            cap = _sim_capture(r)
+            _edit_scan(cap, section, field, value)
+            return _run(command, cap, r)
+
+        cases.append(Case(f"{command}-{label}", command, kind, edited, "refused", named))
+    # lit images that hold nothing to measure: noise, black, one value, clipped
+    for label, (edit, said) in LIT_EDITS.items():
+        cases.append(
+            Case(
+                f"{command}-lit-{label}",
+                command,
+                "impossible values",
+                lambda r, e=edit: _run(command, _lit_codes(r, e), r),
+                "refused",
+                said,
+            )
+        )
+    return cases
+
+
+def _fit_cases() -> list[Case]:
+    cases = _capture_cases("fit")
 
     # outputs that would land in an input folder: refused before anything is written
     def out_is_caps(r: Path) -> list[str]:
@@ -675,25 +765,14 @@ def _fit_cases() -> list[Case]:
             slow=True,
         )
     )
-    # capture.toml fields that set the work
-    for value in (1e6, 65.0, 1e300):
-        cases.append(
-            Case(
-                f"fit-smooth-standard-px-{value:g}",
-                "fit",
-                "unbounded work",
-                lambda r, v=value: (
-                    _edit_scan(_sim_capture(r), "fit", "smooth_standard_px", v),
-                    _fit([r / "caps"], r / "fits"),
-                )[1],
-                "refused",
-                "smooth_standard_px",
-            )
-        )
     for label, edits, named in (
         ("ppb-100000", {"thresholds__ppb": [12] * 100_000}, "thresholds.ppb"),
         ("ppb-1001", {"thresholds__ppb": [12] * 1001}, "thresholds.ppb"),
-        ("observers-1e6", {"thresholds__ppb_mean": 12.0, "thresholds__n_observers": 10**6}, "n_observers"),
+        (
+            "observers-1e6",
+            {"thresholds__ppb": None, "thresholds__ppb_mean": 12.0, "thresholds__n_observers": 10**6},
+            "n_observers",
+        ),
         ("region-1x1", {"photo__region": [40, 41, 50, 51]}, "region"),
         ("region-2x2", {"photo__region": [40, 42, 50, 52]}, "region"),
         ("region-3x5", {"photo__region": [40, 43, 50, 55]}, "region"),
@@ -705,67 +784,129 @@ def _fit_cases() -> list[Case]:
 
         if named is None:  # 128 pixels in one row: enough to measure, accepted (a full fit)
             cases.append(Case(f"fit-phone-{label}", "fit", "impossible values", phone, "ok", slow=True))
-        else:
-            cases.append(Case(f"fit-phone-{label}", "fit", "unbounded work", phone, "refused", named))
-    # image files that are not regular files, or not what capture.toml says
-    for kind in ("fifo", "urandom", "folder", "broken-link"):
-
-        def special_lit(r: Path, kind=kind) -> list[str]:
-            cap = _sim_capture(r)
-            (cap / "lit.png").unlink()
-            _special(cap, kind, "lit.png")
-            return _fit([cap], r / "fits")
-
-        cases.append(Case(f"fit-lit-{kind}", "fit", "misleading messages", special_lit, "refused", SPECIAL_NAMED[kind]))
-    for kind in ("fifo", "urandom", "folder"):
-
-        def special_toml(r: Path, kind=kind) -> list[str]:
-            cap = _sim_capture(r)
-            (cap / "capture.toml").unlink()
-            _special(cap, kind, "capture.toml")
-            return _fit([cap], r / "fits")
-
-        cases.append(
-            Case(f"fit-toml-{kind}", "fit", "misleading messages", special_toml, "refused", SPECIAL_NAMED[kind])
-        )
-    for kind in ("fifo", "urandom"):
-
-        def special_photo(r: Path, kind=kind) -> list[str]:
-            cap = _phone_capture(r)
-            (cap / "photo.png").unlink()
-            _special(cap, kind, "photo.png")
-            return _fit([cap], r / "fits")
-
-        cases.append(
-            Case(f"fit-photo-{kind}", "fit", "misleading messages", special_photo, "refused", SPECIAL_NAMED[kind])
-        )
-    cases.append(
-        Case(
-            "fit-capture-long-name",
-            "fit",
-            "misleading messages",
-            lambda r: _fit([r / ("c" * 300)], r / "fits"),
-            "refused",
-            "255",
-        )
-    )
-    cases.append(
-        Case(
-            "fit-image-size-huge",
-            "fit",
-            "unbounded work",
-            lambda r: (
-                _edit_scan(_sim_capture(r), "camera", "image_size", [100_000, 100_000]),
-                _fit([r / "caps"], r / "fits"),
-            )[1],
-            "refused",
-            "image_size",
-        )
-    )
+        else:  # 100,000 thresholds take seconds to write and parse: the limit itself is tried by 1,001
+            cases.append(
+                Case(f"fit-phone-{label}", "fit", "unbounded work", phone, "refused", named, slow=label == "ppb-100000")
+            )
     # a planar-configuration TIFF is an RGB image like any other: it loads
     cases.append(Case("load-planar-tiff", "library", "misleading messages", _planar_capture, "ok"))
     # the output folder among the captures is skipped, not fitted as a capture
     cases.append(Case("fit-out-among-captures", "fit", "data loss", _out_among_captures, "ok", slow=True))
+    return cases
+
+
+def _diagnose_cases() -> list[Case]:
+    """Every class ``wardjax fit`` refuses that applies to ``diagnose``, and where its own outputs would go."""
+    cases = _capture_cases("diagnose")
+    cases.append(
+        Case(
+            "diagnose-method-smartphone",
+            "diagnose",
+            "impossible values",
+            lambda r: _run("diagnose", _phone_capture(r), r),
+            "refused",
+            "method",
+        )
+    )
+    for label, out in (("capture", "caps/a"), ("inside-capture", "caps/a/d")):
+        cases.append(
+            Case(
+                f"diagnose-out-{label}",
+                "diagnose",
+                "data loss",
+                lambda r, out=out: ["diagnose", str(_sim_capture(r)), "--out", str(r / out)],
+                "refused",
+                "--out",
+            )
+        )
+    return cases
+
+
+# --------------------------------------------------------------------------- a smartphone capture's colour correction
+
+EXAMPLE = HERE.parent / "examples" / "smartphone" / "colorchecker-red"
+
+
+def _chart_capture(r: Path, how: str) -> Path:
+    """The shipped ColorChecker example, its chart read in reversed patch order or photographed as a grey card."""
+    import imageio.v3 as iio
+
+    cap = r / "caps" / "chart"
+    shutil.copytree(EXAMPLE, cap)
+    text = (cap / "capture.toml").read_text()
+    order = next(ln for ln in text.splitlines() if ln.startswith("order = "))
+    values = [int(v) for v in order.split("[")[1].split("]")[0].split(", ")]
+    if how == "reversed":  # every patch read from the wrong cell
+        text = text.replace(order, f"order = {values[::-1]}")
+    if how == "colours-reversed":  # the greys (chart indices 18–23) in place, the 18 colours read in reverse
+        text = text.replace(order, f"order = {[17 - v if v < 18 else v for v in values]}")
+    (cap / "capture.toml").write_text(text)
+    if how.startswith("grey"):
+        photo = iio.imread(cap / "photo.png")
+        grey = np.full(photo.shape, 128.0) + (
+            2 * np.random.default_rng(1).standard_normal(photo.shape) if how == "grey-noisy" else 0
+        )
+        iio.imwrite(cap / "photo.png", np.clip(np.round(grey), 0, 255).astype(np.uint8))
+    return cap
+
+
+def _chart_library(r: Path, how: str):
+    """``fit_smartphone(..., chart=chart_correction(...))`` on the broken chart: the library path."""
+    import imageio.v3 as iio
+
+    cap = wj.load_capture(_chart_capture(r, how))
+    cc = cap.config.color_correction
+    photo = iio.imread(cap.path / "photo.png")
+    region = tuple(cap.config.photo.region)
+
+    def call():
+        chart = wj.smartphone.chart_correction(photo, cc.regions(), surface=region)
+        return wj.fit_smartphone(photo, region, ppb=[33, 30, 36], chart=chart)
+
+    return call
+
+
+def _chart_cases() -> list[Case]:
+    cases = []
+    # each fits the chart's correction 24 times (leave one out): a second or so; the two tone-exponent cases are slow
+    for how, said, slow in (
+        ("reversed", "tone exponent", True),
+        ("colours-reversed", "held-out ΔE", False),
+        ("grey", "one level", False),
+        ("grey-noisy", "tone exponent", True),
+    ):
+        cases.append(
+            Case(
+                f"fit-phone-chart-{how}",
+                "fit",
+                "impossible values",
+                lambda r, h=how: _fit([_chart_capture(r, h)], r / "fits"),
+                "refused",
+                f"color_correction: {'the colour correction failed: ' if said.startswith('held') else ''}",
+                slow=slow,
+            )
+        )
+        cases.append(
+            Case(
+                f"fit-smartphone-chart-{how}",
+                "library",
+                "impossible values",
+                lambda r, h=how: _chart_library(r, h),
+                "refused",
+                said,
+                slow=slow,
+            )
+        )
+    cases.append(
+        Case(
+            "fit-phone-chart-as-shipped",
+            "fit",
+            "impossible values",
+            lambda r: _fit([_chart_capture(r, "")], r / "fits"),
+            "ok",
+            slow=True,
+        )
+    )
     return cases
 
 
@@ -1067,7 +1208,15 @@ _CACHE: dict[str, Path] = {}
 
 
 def all_cases() -> list[Case]:
-    return [*_texture_cases(), *_synthesize_cases(), *_simulate_cases(), *_fit_cases(), *_report_cases()]
+    return [
+        *_texture_cases(),
+        *_synthesize_cases(),
+        *_simulate_cases(),
+        *_fit_cases(),
+        *_diagnose_cases(),
+        *_chart_cases(),
+        *_report_cases(),
+    ]
 
 
 def make_shared(root: Path) -> None:
@@ -1248,13 +1397,13 @@ def test_the_corpus_is_large_and_covers_every_command_and_class():
     assert len(CASES) >= 300
     assert len({c.id for c in CASES}) == len(CASES)
     commands = {c.command for c in CASES}
-    assert {"texture analyze", "texture synthesize", "simulate", "fit", "report", "library"} <= commands
+    assert {"texture analyze", "texture synthesize", "simulate", "fit", "diagnose", "report", "library"} <= commands
     kinds = {c.kind for c in CASES}
     assert {"data loss", "impossible values", "unbounded work", "report inputs", "misleading messages"} <= kinds
 
 
 @pytest.mark.parametrize("case", [pytest.param(c, id=c.id, marks=[pytest.mark.slow] if c.slow else []) for c in CASES])
-def test_corpus_case(case: Case, shared: Path, tmp_path: Path):
+def test_corpus_case(case: Case, shared: Path):
     outcome, seen = judge(case, shared / "cases" / case.id.replace("/", "_"))
     shutil.rmtree(shared / "cases" / case.id.replace("/", "_"), ignore_errors=True)
     assert outcome == "right", f"{case.id}: {outcome}: {seen}"

@@ -11,7 +11,12 @@ caller turns the field into its own spelling (``--rho-d`` on the command line,
   sample; a focal length in pixels that gives a horizontal field of view
   between :data:`MIN_FOV_DEG` and :data:`MAX_FOV_DEG`, ``f = (w / 2) / tan(fov / 2)``.
 * Images: lit and dark of one size, channel count, bit depth and kind of file;
-  a lit image that is not black everywhere and not one value everywhere.
+  a lit image that is not black everywhere, not one value everywhere, and a
+  picture rather than random noise: neighbouring pixels of a photographed scene
+  are correlated (lag-1 correlation ≥ :data:`MIN_NEIGHBOUR_CORRELATION`).
+* A probe that is seen and measured: some pixel sees it, at most
+  :data:`MAX_CLIPPED_FRACTION` of its pixels are clipped, and some pixel's lamp
+  signal clears the noise floor with its mirror point on the standard.
 * A smartphone region that is not mostly black or saturated in any channel,
   so that ρd is measured, not the clip level, and that holds at least
   :data:`MIN_REGION_PIXELS` pixels, so that its σ can be estimated.
@@ -43,6 +48,7 @@ __all__ = [
     "MAX_FOV_DEG",
     "MAX_CLIPPED_FRACTION",
     "MIN_FOV_DEG",
+    "MIN_NEIGHBOUR_CORRELATION",
     "RuleError",
     "check_camera_correction",
     "check_count",
@@ -53,6 +59,7 @@ __all__ = [
     "check_ward_arrays",
     "check_image_pair",
     "check_lit_exposure",
+    "check_lit_picture",
     "check_photo_region",
     "check_position",
     "check_rho_d_map",
@@ -69,6 +76,9 @@ MIN_FOV_DEG = 1.0
 MAX_FOV_DEG = 170.0
 # More than this fraction of pixels at the clip level in a channel: the value measured is the clip, not the surface.
 MAX_CLIPPED_FRACTION = 0.5
+# Below this lag-1 correlation between neighbouring pixels a lit image is noise, not a photographed scene: a
+# scene's pixels share its surfaces and light (r ≈ 0.9 and more), independent random codes give r ≈ 0 (± 0.01).
+MIN_NEIGHBOUR_CORRELATION = 0.2
 # A photo region smaller than this (4 × 4 pixels) leaves its σ unestimated: ρd "± 0" is not a measurement.
 MIN_REGION_PIXELS = 16
 # How far outside [0, 1] a measured ρd may stray by noise alone (a pixel of a ρd map, a region mean).
@@ -245,6 +255,23 @@ def check_lit_exposure(name: str, codes: np.ndarray, linear_max: float, floor: f
         )
     if codes.size and codes.min() == codes.max():
         raise RuleError(name, f"holds the single value {codes.flat[0]} everywhere; nothing to measure")
+
+
+def check_lit_picture(name: str, correlation: float) -> None:
+    """Refuse a lit image whose neighbouring pixels are uncorrelated: random noise, not a photograph of the rig.
+
+    ``correlation`` is the larger of the horizontal and vertical lag-1 correlations of the image's
+    codes (Pearson, pooled over the channels; NaN where the rows read hold one value). A photograph
+    shares each surface and its lighting between neighbouring pixels; independent codes do not, and
+    whatever a fit or a discovery would report from them (a ρd above 1, an "effect") is made of noise.
+    """
+    if math.isfinite(correlation) and correlation < MIN_NEIGHBOUR_CORRELATION:
+        raise RuleError(
+            name,
+            f"holds no picture: neighbouring pixels are uncorrelated (r = {correlation:.2f}, a photograph gives "
+            f"{MIN_NEIGHBOUR_CORRELATION:g} and more), as in random noise; nothing of the probe or the standard "
+            "to measure",
+        )
 
 
 def check_photo_region(name: str, values: np.ndarray, top: float) -> None:

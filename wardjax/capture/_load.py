@@ -4,12 +4,13 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import math
 from pathlib import Path
 
 import numpy as np
 
 from .._files import RAW_SUFFIXES, decode_lut, file_problem, sha256
-from .._rules import RuleError, check_image_pair, check_lit_exposure
+from .._rules import RuleError, check_image_pair, check_lit_exposure, check_lit_picture
 from ..geometry import Camera, Rig
 from ._errors import CAPTURE_FILE, CaptureError
 from ._images import CaptureImages, ImageSource, Window, open_image
@@ -153,6 +154,41 @@ def _extremes(source: ImageSource) -> tuple[int, int]:
         raise CaptureError(source.name, None, f"cannot read the image ({_reason(e)})") from None
 
 
+# Row pairs read, evenly spaced, for the lit image's neighbour correlation: a few hundred rows of any image.
+_PAIRS = 64
+# Fewer neighbouring pixel pairs than this say too little (random codes would spread by ± 0.05 about r = 0).
+_MIN_PAIRS = 400
+
+
+def _neighbour_correlation(source: ImageSource) -> float:
+    """The larger of the horizontal and vertical lag-1 correlations of ``source``'s codes, averaged over channels.
+
+    Read from :data:`_PAIRS` pairs of adjacent rows spread over the image; NaN where they hold one value or
+    fewer than :data:`_MIN_PAIRS` pixel pairs (the estimate's spread, about ``1/√n``, would reach the rule's bound).
+    """
+    h, w = source.height, source.width
+    if h < 2 or w < 2:
+        return math.nan
+    starts = np.unique(np.linspace(0, h - 2, min(_PAIRS, h - 1)).round().astype(int))
+    try:
+        a = np.stack([source.read(slice(r, r + 2)) for r in starts]).astype(np.float64)  # (P, 2, W, 3)
+    except Exception as e:
+        raise CaptureError(source.name, None, f"cannot read the image ({_reason(e)})") from None
+
+    def corr(x: np.ndarray, y: np.ndarray) -> float:  # per channel (last axis), then the mean of those defined
+        if x.shape[0] < _MIN_PAIRS:
+            return math.nan
+        x, y = x - x.mean(axis=0), y - y.mean(axis=0)
+        den = np.sqrt((x * x).sum(axis=0) * (y * y).sum(axis=0))
+        r = (x * y).sum(axis=0)[den > 0] / den[den > 0]
+        return float(r.mean()) if r.size else math.nan
+
+    c = a.shape[-1]
+    horizontal = corr(a[:, :, :-1].reshape(-1, c), a[:, :, 1:].reshape(-1, c))
+    vertical = corr(a[:, 0].reshape(-1, c), a[:, 1].reshape(-1, c))
+    return max(horizontal, vertical) if math.isfinite(horizontal) and math.isfinite(vertical) else math.nan
+
+
 def load_capture(path) -> Capture | SmartphoneCapture | PhotoCapture:
     """Load and validate a capture folder.
 
@@ -192,6 +228,7 @@ def load_capture(path) -> Capture | SmartphoneCapture | PhotoCapture:
         raise CaptureError(cfg.images.lit, None, "every pixel is saturated (at the largest code); reduce the exposure")
     try:  # the encodings are increasing: the brightest linear value is that of the largest code
         check_lit_exposure(cfg.images.lit, np.array([lo, hi], lit.dtype), float(lut[hi]), cfg.fit.noise_floor)
+        check_lit_picture(cfg.images.lit, _neighbour_correlation(lit))
     except RuleError as e:
         raise CaptureError(e.field, None, e.message) from None
     dark = None

@@ -114,14 +114,23 @@ def capture_data(cap: Capture, *, max_samples: int = 20_000, band_rows: int = 51
     band_rows
         Rows processed at a time.
     """
-    from ..reconstruct import MIN_SCANLINE_SAMPLES, bin_scanlines, reconstruct_capture
+    from ..reconstruct import (
+        MIN_SCANLINE_SAMPLES,
+        bin_scanlines,
+        check_measured,
+        check_probe,
+        mask_counts,
+        prepare_bands,
+        reconstruct_capture,
+    )
 
     if cap.method != "scanline":
         raise CaptureError(CAPTURE_FILE, "method", f"diagnose needs method = 'scanline', got {cap.method!r}")
     cfg, rig = cap.config, cap.rig
-    rec = reconstruct_capture(cap, band_rows=band_rows, dtype=np.float64, clip_bounds=True)
-    if not rec.probe.any():
-        raise CaptureError(CAPTURE_FILE, "camera", "no pixel of the image sees the probe")
+    setup = prepare_bands(cap, band_rows=band_rows, dtype=np.float64)
+    check_probe(cap, setup, band_rows)  # the checks wardjax fit applies: a capture it refuses is refused here
+    rec = reconstruct_capture(cap, band_rows=band_rows, dtype=np.float64, clip_bounds=True, setup=setup)
+    check_measured(cap, mask_counts(rec.probe, rec.flags), int((rec.probe & np.isfinite(rec.f_r).all(-1)).sum()))
     bins = bin_scanlines(rec, max_samples)  # scanlines = image columns
     F, cens = bins.f_r, bins.censored
     keep = np.sum(np.all(np.isfinite(F) & ~cens, axis=-1), axis=1) >= MIN_SCANLINE_SAMPLES  # uncensored values

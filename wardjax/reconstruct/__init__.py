@@ -13,6 +13,9 @@ from ._bins import bin_layout as bin_layout
 from ._reference import MaskReason as MaskReason
 from ._reference import reconstruct_brdf as reconstruct_brdf
 from ._reference import sample_bilinear as sample_bilinear
+from ._checks import check_measured as check_measured
+from ._checks import check_probe as check_probe
+from ._checks import mask_counts as mask_counts
 
 __all__ = [
     "Reconstruction",
@@ -28,4 +31,7 @@ __all__ = [
     "MaskReason",
     "reconstruct_brdf",
     "sample_bilinear",
+    "check_measured",
+    "check_probe",
+    "mask_counts",
 ]

@@ -309,7 +309,12 @@ def reconstruct_bands(cap, setup: BandSetup, step: int) -> Iterator[tuple[slice,
 
 
 def reconstruct_capture(
-    cap, *, band_rows: int = 512, dtype: DTypeLike = np.float32, clip_bounds: bool = False
+    cap,
+    *,
+    band_rows: int = 512,
+    dtype: DTypeLike = np.float32,
+    clip_bounds: bool = False,
+    setup: BandSetup | None = None,
 ) -> Reconstruction:
     """Reconstruct ``f_r`` for every probe pixel of a ``method = "scanline"`` capture.
 
@@ -327,11 +332,13 @@ def reconstruct_capture(
     px accurate in the mirror mapping; float64 for the effects workflow).
     ``clip_bounds`` also keeps :attr:`Reconstruction.f_clip`, the lower
     bound of every probe pixel clipped by the sensor (censored data for
-    :func:`wardjax.effects.discover`; one more image in memory).
+    :func:`wardjax.effects.discover`; one more image in memory). ``setup`` is the first
+    pass when the caller made it already (in ``dtype``), to check it first.
     """
     h, w = cap.rig.camera.height, cap.rig.camera.width
     dtype = np.dtype(dtype)
-    setup = prepare_bands(cap, band_rows=band_rows, dtype=dtype)
+    if setup is None:
+        setup = prepare_bands(cap, band_rows=band_rows, dtype=dtype)
     f_r = np.full((h, w, 3), np.nan, dtype)
     wi = np.zeros((h, w, 3), dtype)
     wo = np.zeros((h, w, 3), dtype)

@@ -599,6 +599,12 @@ def diagnose_cmd(
     if not capture.exists():
         _fail(f"{capture}: no such capture folder")
     _check_out_dir(out_dir)
+    from ._batch import check_out_outside
+
+    try:  # outputs never touch inputs
+        check_out_outside(capture, out_dir)
+    except ValueError as exc:
+        _fail(str(exc))
     with Stages(progress) as stages:
         stages.advance("loading the capture and JAX")
         from ..capture import CAPTURE_FILE, Capture, CaptureError, load_capture

@@ -21,7 +21,6 @@ import dataclasses
 import numpy as np
 
 from .. import _shapes
-from .._rules import MAX_CLIPPED_FRACTION
 from .._status import Status
 from ..capture import CAPTURE_FILE, Capture, CaptureError
 from ..export import RADIANCE_NORMALIZATION
@@ -31,9 +30,11 @@ from ..geometry import Camera
 from ..reconstruct import (
     MIN_SCANLINE_SAMPLES,
     BandSetup,
-    MaskReason,
     ScanlineBinner,
     bin_layout,
+    check_measured,
+    check_probe,
+    mask_counts,
     prepare_bands,
     reconstruct_bands,
 )
@@ -195,19 +196,8 @@ def _fit_scanline_capture(cap, *, max_fit_samples: int, band_rows: int, max_step
     # per-pixel values are made again, band by band, for the texture once the fit is known (_texture).
     stage(f"{cap.name}: reconstructing the probe's BRDF values")
     setup = prepare_bands(cap, band_rows=band_rows)
+    check_probe(cap, setup, band_rows)  # seen, not clipped: the checks diagnose applies too
     probe = setup.probe
-    n_probe = int(probe.sum())
-    if n_probe == 0:
-        raise CaptureError(
-            CAPTURE_FILE,
-            "camera",
-            "no pixel of the image sees the probe; check rig.camera, camera.look_at and regions.probe",
-        )
-    sat = _clipped_fraction(cap, setup, band_rows)
-    if sat > MAX_CLIPPED_FRACTION:
-        raise CaptureError(
-            lit_name, None, f"{sat:.0%} of the probe's pixels are saturated (at the largest code); reduce the exposure"
-        )
     bins, flags, n_valid, counts, step = _bin_bands(cap, setup, max_fit_samples, band_rows)
 
     # ---------------------------------------------------------------- fit data
@@ -276,18 +266,6 @@ def _fit_scanline_capture(cap, *, max_fit_samples: int, band_rows: int, max_step
     )
 
 
-def _clipped_fraction(cap: Capture, setup: BandSetup, band_rows: int) -> float:
-    """The fraction of probe pixels whose own lit value is clipped, from the codes of the probe's box band by band."""
-    if setup.box is None:
-        return 0.0
-    rows_p, cols = setup.box
-    n, step = 0, max(1, band_rows)
-    for r0 in range(rows_p.start, rows_p.stop, step):
-        rows = slice(r0, min(r0 + step, rows_p.stop))
-        n += int(np.count_nonzero(cap.images.clipped(rows, cols).any(axis=-1) & setup.probe[rows, cols]))
-    return n / max(int(setup.probe.sum()), 1)
-
-
 def _bin_bands(cap: Capture, setup: BandSetup, max_fit_samples: int, band_rows: int):
     """The reconstruction's first pass: each band binned for the fit, its flags kept, its pixels dropped.
 
@@ -295,7 +273,7 @@ def _bin_bands(cap: Capture, setup: BandSetup, max_fit_samples: int, band_rows: 
     flags, the count of usable probe pixels and of each mask reason, and the
     rows per band (whole bins). Raises if no probe pixel is usable.
     """
-    probe, cfg, lit_name = setup.probe, cap.config, cap.config.images.lit
+    probe = setup.probe
     box, b = bin_layout(probe, max_fit_samples)
     step = max(b, band_rows // b * b)  # bands of whole bins
     binner = ScanlineBinner(probe, box, b)
@@ -305,17 +283,8 @@ def _bin_bands(cap: Capture, setup: BandSetup, max_fit_samples: int, band_rows: 
         flags[rows, box[1]] = flags_b
         n_valid += int((probe[rows, box[1]] & np.all(np.isfinite(f_b), axis=-1)).sum())
         binner.add(rows, f_b, wi_b, wo_b, points_b)
-    counts = {name.lower(): int(np.sum(probe & ((flags & r) != 0))) for name, r in MaskReason.__members__.items()}
-    if n_valid == 0:
-        worst = max(counts, key=lambda reason: counts[reason])
-        why = {
-            "off_standard": "no probe pixel has its mirror point on the standard (check regions and the rig)",
-            "saturated": "every probe pixel or its mirror point is saturated; reduce the exposure",
-            "below_noise": f"the lamp signal (lit − dark) is below the noise floor ({cfg.fit.noise_floor}) "
-            "everywhere on the probe or the standard; check the exposure and the lamp",
-            "nonfinite": "the pixel values are not finite",
-        }[worst]
-        raise CaptureError(lit_name, None, f"no usable probe pixel: {why}")
+    counts = mask_counts(probe, flags)
+    check_measured(cap, counts, n_valid)
     return binner.result(), flags, n_valid, counts, step
 
 
