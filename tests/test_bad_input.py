@@ -605,8 +605,8 @@ def test_a_full_disk_is_refused_before_any_work(good, tmp_path, monkeypatch):
 
 
 def test_a_colour_correction_that_failed_is_refused():
-    """The real ColorChecker photo's correction holds out at ΔE*ab ≈ 3–5 and passes; the same photo read
-    in reversed patch order fits its own patches yet holds out far worse: refused by the rule, naming
+    """The real ColorChecker photo's correction holds out at ΔE*ab ≈ 3–5 and passes; the same photo with its
+    colours read in reversed order fits its own patches yet holds out far worse: refused by the rule, naming
     what to check. With no patch held out, the error cannot be estimated: refused too."""
     import tomllib
 
@@ -631,9 +631,14 @@ def test_a_colour_correction_that_failed_is_refused():
     good = colorchecker_held_out_delta_E(rho, ref, usable=usable)
     check_camera_correction("chart.png", good)
     assert np.nanmedian(good) < MAX_HELD_OUT_DELTA_E / 2
-    reversed_layout = colorchecker_held_out_delta_E(rho[::-1], ref, usable=usable[::-1])
+    # the 18 colours read in reverse, the greys (chart indices 18–23) in place: the tone curve still fits
+    order = np.r_[np.arange(17, -1, -1), np.arange(18, 24)]
+    reversed_layout = colorchecker_held_out_delta_E(rho[order], ref, usable=usable[order])
     with pytest.raises(RuleError, match="^chart.png: the colour correction failed: held-out ΔE") as info:
         check_camera_correction("chart.png", reversed_layout)
     assert len(str(info.value).splitlines()) == 1
+    # every patch reversed: the greys read colours, and the tone exponent no camera needs is refused first
+    with pytest.raises(ValueError, match="tone exponent of 0.0"):
+        colorchecker_held_out_delta_E(rho[::-1], ref, usable=usable[::-1])
     with pytest.raises(RuleError, match="cannot be estimated"):
         check_camera_correction("chart.png", np.full(24, np.nan))

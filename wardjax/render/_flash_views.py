@@ -38,14 +38,7 @@ from ..export import radiance_rgb
 from ..ward import WardParams, ward_brdf
 from ._radiance import RTRACE_SETTINGS, _radiance_paths, _run, from_radiance_rgb
 
-__all__ = [
-    "FlashViews",
-    "flash_views",
-    "flash_views_scene",
-    "radiance_render_flash_views",
-    "rectified_geometry",
-    "render_flash_views",
-]
+# Its public names are listed once, in the package's __init__ (wardjax.render), which re-exports them.
 
 
 class FlashViews(NamedTuple):

@@ -20,6 +20,7 @@ from ._cli_checks import (
     _fail,
     _parse_region,
     _parse_size,
+    out_dir_option,
 )
 from ._cli_import import import_cmd
 
@@ -562,13 +563,7 @@ _DIAGNOSE_SAMPLES = {True: 6_000, False: 20_000}
 
 @main.command("diagnose")
 @click.argument("capture", type=click.Path(path_type=Path))
-@click.option(
-    "--out",
-    "out_dir",
-    type=click.Path(file_okay=False, path_type=Path),
-    required=True,
-    help="Folder for report.json, report.md and the PNGs.",
-)
+@out_dir_option("Folder for report.json, report.md and the PNGs.")
 @click.option(
     "--max-steps", type=click.IntRange(0, 10), default=4, show_default=True, help="At most this many effects are added."
 )

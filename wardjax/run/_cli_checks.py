@@ -6,6 +6,7 @@ import os
 import sys
 from pathlib import Path
 
+import click
 from rich.console import Console
 from rich.markup import escape
 
@@ -17,6 +18,8 @@ __all__ = [
     "_one_line",
     "_parse_region",
     "_parse_size",
+    "choice_option",
+    "out_dir_option",
 ]
 
 
@@ -99,3 +102,13 @@ def _parse_size(text: str) -> tuple[int, int]:
     if w < 1 or h < 1:
         _fail(f"--size {text!r}: width and height must be positive")
     return h, w
+
+
+def out_dir_option(help: str):
+    """The required ``--out DIR`` option: the folder a command writes (``help`` says what goes in it)."""
+    return click.option("--out", "out_dir", type=click.Path(file_okay=False, path_type=Path), required=True, help=help)
+
+
+def choice_option(flag: str, choices: tuple[str, ...], help: str | None = None):
+    """An option ``flag`` taking one of ``choices``, the first the default (shown in ``--help``)."""
+    return click.option(flag, type=click.Choice(choices), default=choices[0], show_default=True, help=help)
