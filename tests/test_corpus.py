@@ -167,7 +167,7 @@ def _texture_cases() -> list[Case]:
 
     # a fraction of stray pixels at 1.3 in a map at 0.5: specks are noise, a tenth is not a reflectance
     def stray(r: Path, f: float) -> list[str]:
-        a = _rho_map(0.5, (50, 50))
+        a = _rho_map(0.5)  # the shape of the other maps: one compiled analysis serves them all
         a.reshape(-1)[: int(round(f * a.size))] = 1.3
         return _analyze(_npy(r, a), r)
 
