@@ -16,7 +16,7 @@ jittered samples per pixel, box filter). Printed: the mean relative
 difference ``|render − wardjax| / wardjax`` over the lit probe and over its
 highlight (pixels whose specular part exceeds the diffuse one), and the
 conversion errors the export records. ``--png FILE`` writes the three renders
-side by side.
+side by side, and below them each export's relative difference to the Ward render.
 
     python benchmarks/export_renders.py [--png docs/exports_renders.png]
 """
@@ -175,18 +175,39 @@ def main(argv=None) -> dict:
 
 
 def _figure(path, ward, mits, gltf) -> None:
+    """Top: the three renders (one display scale); bottom: each export's relative difference to the Ward render."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
-    fig = Figure(figsize=(9.0, 2.6), dpi=110)
+    fig = Figure(figsize=(8.0, 5.6), dpi=110, layout="constrained")
     FigureCanvasAgg(fig)
+    lit = np.all(ward > 1e-12, axis=-1)
+    rows, cols = np.flatnonzero(lit.any(1)), np.flatnonzero(lit.any(0))
+    crop = np.s_[max(rows[0] - 4, 0) : rows[-1] + 5, max(cols[0] - 4, 0) : cols[-1] + 5]  # the probe
     scale = np.percentile(ward, 99.5)
-    for i, (name, img) in enumerate([("wardjax (Ward)", ward), ("Mitsuba 3 (export)", mits), ("glTF (export)", gltf)]):
-        ax = fig.add_subplot(1, 3, i + 1)
-        ax.imshow(np.clip(img / scale, 0, 1) ** (1 / 2.2))
+    renders = [("wardjax (Ward)", ward), ("Mitsuba 3 (export)", mits), ("glTF (export)", gltf)]
+    axs = fig.subplots(2, 3)
+    for ax, (name, img) in zip(axs[0], renders):
+        ax.imshow(np.clip(img[crop] / scale, 0, 1) ** (1 / 2.2))
         ax.set_title(name, fontsize=9)
         ax.set_axis_off()
-    fig.tight_layout()
+    ref = np.where(lit, ward.mean(-1), 1.0)
+    axs[1, 0].set_axis_off()
+    axs[1, 0].text(
+        0.0,
+        0.5,
+        "Top: radiance, linear mean RGB\nscaled to the Ward render's 99.5th\npercentile, shown with gamma 1/2.2.\n\n"
+        "Right: (export − Ward) / Ward of\nthe mean RGB on the lit probe\n(dimensionless; white: unlit).",
+        fontsize=8,
+        va="center",
+    )
+    for ax, (name, img) in zip(axs[1, 1:], renders[1:]):
+        rel = np.where(lit, (img.mean(-1) - ward.mean(-1)) / ref, np.nan)[crop]
+        im = ax.imshow(np.ma.masked_invalid(rel), cmap="RdBu_r", vmin=-0.15, vmax=0.15)
+        ax.set_title(f"{name.split(' (')[0]} − Ward: mean |rel.| {np.nanmean(np.abs(rel)):.3f}", fontsize=8)
+        ax.set_axis_off()
+        cb = fig.colorbar(im, ax=ax, shrink=0.8)
+        cb.ax.tick_params(labelsize=7)
     fig.savefig(path, metadata={"Software": None})
 
 

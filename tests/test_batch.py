@@ -66,6 +66,11 @@ def test_bad_captures_do_not_sink_the_batch(captures, tmp_path):
         rows = list(csv.DictReader(fh))
     assert [r["status"] for r in rows] == ["error", "ok", "error"]
     assert rows[2]["error"] == items[2].error and rows[1]["rho_s"] != ""
+    # fit quality named by what it is: a unit-weight scanline fit has an RMS residual (sr⁻¹), no χ²/dof
+    res = json.loads((out / "good" / "params.json").read_text())["fit"]["diagnostics"]["residuals"]
+    assert "reduced_chi2" not in rows[1] and rows[1]["weighted_chi2_per_dof"] == ""
+    assert float(rows[1]["residual_rms_sr-1"]) == pytest.approx(res["rms"], rel=1e-5)
+    assert float(rows[1]["residual_rms_relative"]) == pytest.approx(res["relative_rms"], rel=1e-5)
 
 
 def test_find_captures(captures, tmp_path):

@@ -84,7 +84,17 @@ def test_stage_packages_list_their_reexports_in_all():
 
 
 def test_method_pages_and_notebooks_are_in_the_site(site):
-    pages = ("cli", "image-based", "smartphone", "engine", "texture", "missing-effects", "rendering", "layout")
+    pages = (
+        "cli",
+        "report",
+        "image-based",
+        "smartphone",
+        "engine",
+        "texture",
+        "missing-effects",
+        "rendering",
+        "layout",
+    )
     for page in (*pages, "benchmarks"):
         assert (site / page / "index.html").is_file(), page
     for nb in ("alpha_uncertainty", "missing_effects", "fit_folder", "texture", "validation"):

@@ -93,6 +93,28 @@ def test_01_microfacet_fit_matches_the_ward_lobe_to_its_reported_error(distribut
         assert fit.relative_l2 < 0.1
 
 
+def test_01b_the_engines_solver_finds_scipys_optimum():
+    """optimistix's LM (the engine's) against MINPACK's LM (SciPy, finite differences) on the same objective."""
+    import jax
+    from scipy.optimize import least_squares
+
+    from wardjax.export._microfacet import _Problem, _residual, quadrature
+
+    fit = fit_microfacet(ANISO, normalization=GMD, distribution="beckmann")
+    with jax.enable_x64(True):
+        wi, wo, w = quadrature(float(ANISO.alpha_x), float(ANISO.alpha_y))
+        grey = wj.WardParams(rho_d=np.zeros(3), rho_s=0.05, alpha_x=ANISO.alpha_x, alpha_y=ANISO.alpha_y)
+        target = np.asarray(wj.ward_brdf(grey, wi, wo, normalization=GMD))[..., 0]
+        j = jax.numpy.asarray
+        prob = _Problem(wi=j(wi), wo=j(wo), sqrt_w=j(np.sqrt(w)), target=j(target), rho_d=j(0.4))
+        res = jax.jit(lambda t: _residual(t, prob, "beckmann", "conductor", False))
+        start = np.log([0.05, float(ANISO.alpha_x), float(ANISO.alpha_y)])
+        ref = least_squares(lambda t: np.asarray(res(t)), start, method="lm", xtol=1e-12, ftol=1e-12)
+    # the same optimum to far below the fit's own meaning (a relative L² of 6 %)
+    np.testing.assert_allclose(np.exp(ref.x), [fit.k_s, fit.alpha_x, fit.alpha_y], rtol=1e-5)
+    assert math.sqrt(2 * ref.cost / float(np.sum(w * target**2))) == pytest.approx(fit.relative_l2, rel=1e-6)
+
+
 @pytest.mark.parametrize("distribution", ["beckmann", "ggx"])
 def test_02_mitsuba_evaluates_the_exported_bsdf_as_the_microfacet_formula(distribution, rng):
     mi = pytest.importorskip("mitsuba")

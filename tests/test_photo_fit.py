@@ -11,6 +11,7 @@ their report.
 
 from __future__ import annotations
 
+import csv
 import json
 import shutil
 from pathlib import Path
@@ -76,6 +77,12 @@ def test_02_cli_fit_hold_out_writes_the_panel(multiview, tmp_path):
     doc = json.loads((d / "params.json").read_text())
     assert doc["method"] == "multiview" and doc["fit"]["held_out"]["photo"] == 2
     assert doc["fit"]["photos_fitted"] == [0, 1, 3]
+    # weights 1/σ² from the noise model: summary.csv gives a χ²/dof, about 1 for data made with that noise
+    with open(tmp_path / "fits" / "summary.csv", newline="") as fh:
+        row = next(csv.DictReader(fh))
+    assert doc["fit"]["weighted"] is True and row["residual_rms_sr-1"] == ""
+    assert float(row["weighted_chi2_per_dof"]) == pytest.approx(doc["fit"]["reduced_chi2"], rel=1e-5)
+    assert 0.8 < float(row["weighted_chi2_per_dof"]) < 1.25
     panel = read_image(d / "heldout.png")
     assert panel.shape == (24, 3 * 32 + 8, 3)  # photo | prediction | residual
     assert read_image(d / "rho_d_sigma.tif", rgb=False).shape == (24, 32, 3)

@@ -113,7 +113,7 @@ def test_every_number_is_labelled_alpha_is_an_interval_and_correlations_are_show
     page = report_page
     batch = _text(page[page.index("Batch:") : page.index('id="capture-')])
     # the fit-quality column names what it is: unweighted fits give an RMS residual in sr⁻¹, not a "χ²/dof"
-    assert "fit residual" in batch and "χ²/dof" not in batch and "sr⁻¹" in batch
+    assert "fit quality" in batch and "χ²/dof" not in batch and "sr⁻¹" in batch and "unit weights" in batch
     assert "dimensionless" in batch and "median [68 % interval]" in batch
     sections = {k: _text(v) for k, v in _sections(page).items()}
     for name in SCANLINE:
@@ -125,6 +125,8 @@ def test_every_number_is_labelled_alpha_is_an_interval_and_correlations_are_show
         assert re.search(r"α = [0-9.]+ \(dimensionless[^)]*\); 68 % \[[0-9.]+, [0-9.]+\], 95 % \[", sec), name
         assert "Which σ to believe" in sec and "(reported)" in sec
         assert "ρd (R, G, B; linear, sRGB primaries, white E; dimensionless)" in sec
+        rms = doc["fit"]["diagnostics"]["residuals"]["rms"]
+        assert f"fit quality, RMS residual, unit weights (no noise σ given, so no χ²): RMS {rms:.2g} sr⁻¹" in sec
     for name in ("phone", "phone-chart"):
         sec = sections[name]
         assert re.search(r"posterior median\); 68 % \[[0-9.]+, [0-9.]+\], 95 % \[[0-9.]+, [0-9.]+\]", sec)

@@ -5,8 +5,10 @@ from ._outputs import OUTPUT_FILES as OUTPUT_FILES
 from ._outputs import scanline_figure_png as scanline_figure_png
 from ._outputs import write_capture_outputs as write_capture_outputs
 from ._outputs import write_smartphone_outputs as write_smartphone_outputs
+from ._params import FIT_QUALITY_COLUMNS as FIT_QUALITY_COLUMNS
 from ._params import PARAMS_SCHEMA as PARAMS_SCHEMA
 from ._params import capture_fit_document as capture_fit_document
+from ._params import fit_quality as fit_quality
 from ._params import params_document as params_document
 from ._params import smartphone_document as smartphone_document
 from ._params import software_version as software_version
@@ -33,8 +35,10 @@ __all__ = [
     "scanline_figure_png",
     "write_capture_outputs",
     "write_smartphone_outputs",
+    "FIT_QUALITY_COLUMNS",
     "PARAMS_SCHEMA",
     "capture_fit_document",
+    "fit_quality",
     "params_document",
     "smartphone_document",
     "software_version",

@@ -58,7 +58,7 @@ def scanline_figure_png(fit) -> bytes:
     ax.set_ylabel("$f_r$ (sr$^{-1}$)")
     ax2 = ax.twinx()
     ax2.plot(y, pr["rho_d"].mean(axis=-1), color="C0", lw=0.8, alpha=0.8, label=r"$\rho_d$ modulation")
-    ax2.set_ylabel(r"$\rho_d = \pi\,(f_r - \mathrm{specular})$", color="C0")
+    ax2.set_ylabel(r"$\rho_d = \pi\,(f_r - \mathrm{specular})$ (dimensionless)", color="C0")
     p, e = fit.params, fit.stderr
     ax.set_title(
         f"{fit.name}: scanline at x = {pr['x']:.1f} mm — ρs = {float(p.rho_s):.4f} ± {float(e.rho_s):.4f}, "

@@ -13,9 +13,46 @@ import numpy as np
 from ..ward import WardParams
 from ._radiance import RADIANCE_NORMALIZATION, radiance_rgb
 
-__all__ = ["PARAMS_SCHEMA", "capture_fit_document", "params_document", "smartphone_document", "software_version"]
+__all__ = [
+    "FIT_QUALITY_COLUMNS",
+    "PARAMS_SCHEMA",
+    "capture_fit_document",
+    "fit_quality",
+    "params_document",
+    "smartphone_document",
+    "software_version",
+]
 
 PARAMS_SCHEMA = "wardjax.params/1"
+# What ``fit_quality`` returns, and the columns ``summary.csv`` gives it.
+FIT_QUALITY_COLUMNS = ("weighted_chi2_per_dof", "residual_rms_sr-1", "residual_rms_relative")
+
+
+def fit_quality(fit: dict) -> dict[str, float | None]:
+    """A fit's quality, named by what was computed (``params.json``'s ``fit`` section).
+
+    - ``weighted_chi2_per_dof``: ``χ²/dof = Σ w r² / dof`` with ``w = 1/σ²`` from
+      the photographs' noise model (``fit.weighted``); about 1 when the model
+      fits to the noise. ``None`` for a fit with unit weights, whose
+      ``fit.reduced_chi2`` is ``Σ r²/dof``, a residual variance in sr⁻², not a χ².
+    - ``residual_rms_sr-1``: the RMS of measured − fitted ``f_r`` (sr⁻¹) of a
+      unit-weight fit (``fit.diagnostics.residuals``, else ``√(Σ r²/dof)``).
+    - ``residual_rms_relative``: that RMS over the mean measured ``f_r``.
+
+    All three are ``None`` for a method without a least-squares fit (the
+    smartphone method's posterior).
+    """
+    out: dict[str, float | None] = dict.fromkeys(FIT_QUALITY_COLUMNS)
+    rc = fit.get("reduced_chi2")
+    if fit.get("weighted"):
+        out["weighted_chi2_per_dof"] = None if rc is None else float(rc)
+        return out
+    res = fit.get("diagnostics", {}).get("residuals")
+    if res:
+        out["residual_rms_sr-1"], out["residual_rms_relative"] = float(res["rms"]), float(res["relative_rms"])
+    elif rc is not None:
+        out["residual_rms_sr-1"] = float(rc) ** 0.5
+    return out
 
 
 def params_dict(p: WardParams) -> dict:
@@ -99,7 +136,8 @@ def capture_fit_document(fit, *, created: str, files: dict | None = None, extra:
             "status": comb.status.name.lower(),
             "chi2": comb.chi2,
             "dof": comb.dof,
-            "reduced_chi2": comb.reduced_chi2,
+            "reduced_chi2": comb.reduced_chi2,  # unit weights: Σ r²/dof, the residual variance in sr⁻²
+            "weighted": False,
             "n_scanlines": comb.n_scanlines,
             "covariance": {
                 "parameters": ["rho_s", "alpha"] if fit.model == "isotropic" else ["rho_s", "alpha_x", "alpha_y"],

@@ -151,7 +151,12 @@ def residual_figure(result: CaptureResult) -> Figure | None:
     return fig
 
 
-_CORNER = (("alpha", r"$\alpha$"), ("sigma_obs", r"$\sigma_\mathrm{obs}$"), ("ppb_median", "median PPB"))
+# (chain, axis label with its unit, title above the column)
+_CORNER = (
+    ("alpha", r"$\alpha$ (dimensionless)", r"$\alpha$"),
+    ("sigma_obs", r"$\sigma_\mathrm{obs}$ (SD of ln PPB)", r"$\sigma_\mathrm{obs}$"),
+    ("ppb_median", "median PPB (px per bar)", "PPB"),
+)
 
 
 def corner_figure(result: CaptureResult) -> Figure | None:
@@ -165,19 +170,21 @@ def corner_figure(result: CaptureResult) -> Figure | None:
         return None
     import corner
 
-    keys = [k for k, _ in _CORNER if k in chains]
+    keys = [k for k, _, _ in _CORNER if k in chains]
+    labels = {k: (label, title) for k, label, title in _CORNER}
     draws = np.column_stack([chains[k].ravel() for k in keys]).astype(np.float64)
-    fig = Figure(figsize=(6.0, 6.0), dpi=100)
+    fig = Figure(figsize=(6.4, 6.4), dpi=100)
     corner.corner(
         draws,
         fig=fig,
-        labels=[dict(_CORNER)[k] for k in keys],
+        labels=[labels[k][0] for k in keys],
+        titles=[labels[k][1] for k in keys],
         range=[0.995] * len(keys),  # the central 99.5 % of each parameter: the long tails would squash the rest
         quantiles=[0.16, 0.5, 0.84],
         show_titles=True,
-        title_fmt=".3f",
+        title_fmt=".3g",  # three significant digits: α's unequal arms (skew) stay visible
         title_kwargs={"fontsize": 9},
-        label_kwargs={"fontsize": 10},
+        label_kwargs={"fontsize": 9},
         bins=30,
         smooth=1.0,
     )
@@ -197,7 +204,7 @@ def trace_figure(result: CaptureResult, walkers: int = 8) -> Figure | None:
     for w in range(min(walkers, a.shape[1])):
         ax.plot(steps, a[:, w], lw=0.6, alpha=0.8)
     ax.set_xlabel("step (after burn-in)")
-    ax.set_ylabel(r"$\alpha$")
+    ax.set_ylabel(r"$\alpha$ (dimensionless)")
     ax.set_title(f"{result.name}: α chains of {min(walkers, a.shape[1])} of {a.shape[1]} walkers", fontsize=9)
     fig.tight_layout()
     return fig

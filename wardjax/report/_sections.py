@@ -8,6 +8,8 @@ import io
 import numpy as np
 from matplotlib.figure import Figure
 
+from ..export._params import FIT_QUALITY_COLUMNS
+from ..export._params import fit_quality as export_fit_quality
 from ._collect import PARAMETERS, CaptureResult, flag_outliers, load_chains, split_rhat
 from ._figures import (
     batch_figure,
@@ -57,40 +59,55 @@ def _alpha_cell(r: CaptureResult, key: str) -> str:
     return f"{post['alpha_median']:.4f} [{lo:.4f}, {hi:.4f}]"
 
 
-def fit_quality(doc: dict) -> tuple[str, str]:
+def fit_quality(doc: dict, *, short: bool = False) -> tuple[str, str]:
     """``(value, what it is)`` of a capture's fit quality, named by what was computed.
 
-    A weighted fit (``fit.weighted``) reports χ²/dof; a unit-weight least-squares fit's
-    ``reduced_chi2`` is the residual variance in sr⁻² (not a χ²), so the table gives the
-    RMS residual in sr⁻¹ and as a share of the mean f_r; the smartphone method has no
-    least-squares fit.
+    The numbers are `wardjax.export.fit_quality`'s (the same as ``summary.csv``'s
+    columns): a weighted fit (``fit.weighted``, 1/σ² from a noise model) gives
+    χ²/dof; a unit-weight least-squares fit gives its RMS residual in sr⁻¹ and as
+    a share of the mean f_r (its ``reduced_chi2`` is a residual variance in sr⁻²,
+    not a χ²); the smartphone method has no least-squares fit. ``short``: the
+    value as the batch table gives it (the note under the table says what it is).
     """
-    fit = doc["fit"]
-    if fit.get("weighted") and fit.get("reduced_chi2") is not None:
-        return f"{fit['reduced_chi2']:.3g}", "weighted χ²/dof"
-    res = fit.get("diagnostics", {}).get("residuals")
-    if res:
-        return f"{res['rms']:.2g} sr⁻¹ ({res['relative_rms']:.1%})", "RMS residual, unit weights"
-    if fit.get("reduced_chi2") is not None:
-        rc = fit["reduced_chi2"]
-        return f"{rc**0.5:.2g} sr⁻¹", "RMS residual, unit weights"
-    return "–", "no least-squares fit (posterior)"
+    q = export_fit_quality(doc["fit"])
+    chi, rms, rel = (q[k] for k in FIT_QUALITY_COLUMNS)
+    if chi is not None:
+        return f"χ²/dof {chi:.3g}", "weighted χ²/dof (weights 1/σ² from the noise model; ≈ 1 when the model fits)"
+    if rms is not None:
+        share = "" if rel is None else f" ({rel:.1%})" if short else f" ({rel:.1%} of mean f_r)"
+        return (
+            f"{'' if short else 'RMS '}{rms:.2g} sr⁻¹{share}",
+            "RMS residual, unit weights (no noise σ given, so no χ²)",
+        )
+    return "–", "no least-squares fit (α from a posterior)"
 
 
-_UNITS_NOTE = (
-    "<p class='units'>ρd: diffuse reflectance, mean over R, G, B (linear sRGB primaries, white E); ρs: specular "
-    "reflectance; αx, αy: Ward lobe widths (RMS surface slope, ≈ lobe width in radians). All four are "
-    "dimensionless. Scanline captures: value ± 1σ (the error model each capture section names). Smartphone "
-    "captures: α as posterior median [68 % interval] (the posterior is skewed). Fit residual: measured − fitted "
-    "BRDF, in sr⁻¹ and as a share of the mean measured f_r; the fits are unweighted, so no χ² is quoted. "
-    "Red bold: more than 3.5 robust σ from the batch median (with ≥ 4 captures).</p>"
-)
+_NOTE_PARTS = {
+    "scanline": "Scanline captures: value ± 1σ (the error model each capture section names); fit quality: RMS of "
+    "measured − fitted BRDF in sr⁻¹ and as a share of the mean measured f_r — the fit has unit weights (no noise σ "
+    "is measured), so no χ² is quoted.",
+    "smartphone": "Smartphone captures: α as posterior median [68 % interval] (the posterior is skewed); no "
+    "least-squares fit, so no fit quality.",
+    "photo": "Flash and multi-view captures: value ± 1σ; fit quality: χ²/dof with weights 1/σ² from the "
+    "photographs' noise model (≈ 1 when the model fits to the noise).",
+}
+
+
+def _units_note(results: list[CaptureResult]) -> str:
+    """What the table's numbers are, said only for the methods the batch holds."""
+    kinds = {("photo" if r.doc["method"] in ("flash", "multiview") else r.doc["method"]) for r in results}
+    parts = " ".join(v for k, v in _NOTE_PARTS.items() if k in kinds)
+    return (
+        "<p class='units'>ρd: diffuse reflectance, mean over R, G, B (linear sRGB primaries, white E); ρs: specular "
+        "reflectance; αx, αy: Ward lobe widths (RMS surface slope, ≈ lobe width in radians). All four are "
+        f"dimensionless. {parts} Red bold: more than 3.5 robust σ from the batch median (with ≥ 4 captures).</p>"
+    )
 
 
 def batch_section(results: list[CaptureResult]) -> None:
     """The table across captures (outliers flagged: > 3.5 robust σ from the batch median) and its plot."""
     flags = flag_outliers(results)
-    names = ("capture", "method", "model", "status", "ρd (mean RGB)", "ρs", "αx", "αy", "fit residual")
+    names = ("capture", "method", "model", "status", "ρd (mean RGB)", "ρs", "αx", "αy", "fit quality")
     head = "".join(f"<th>{html.escape(k)}</th>" for k in names)
     rows = []
     for r in results:
@@ -100,7 +117,7 @@ def batch_section(results: list[CaptureResult]) -> None:
             text = _alpha_cell(r, key) if key.startswith("alpha") else _pm(*r.value(key))
             style = ' style="color:#c00;font-weight:bold" title="outlier"' if key in flags[r.name] else ""
             vals.append(f"<td{style}>{html.escape(text)}</td>")
-        q, what = fit_quality(r.doc)
+        q, what = fit_quality(r.doc, short=True)
         rows.append(
             "<tr>"
             + "".join(f"<td>{html.escape(str(c))}</td>" for c in cells)
@@ -112,7 +129,8 @@ def batch_section(results: list[CaptureResult]) -> None:
         _html(
             f"<h2>Batch: {len(results)} capture{'s' if len(results) != 1 else ''}, {n_out} with an outlying "
             "parameter</h2>"
-            f"<table class='batch'><tr>{head}</tr>{''.join(rows)}</table>" + _UNITS_NOTE
+            "<style>table.batch td { white-space: nowrap; }</style>"
+            f"<table class='batch'><tr>{head}</tr>{''.join(rows)}</table>" + _units_note(results)
         )
     )
     _display(_png(batch_figure(results, flags)))
@@ -290,6 +308,11 @@ def _rho_s_source(doc: dict) -> str:
     return f" — assumed, not measured: {html.escape(src)}; σ a quarter of that range" if src else ""
 
 
+def _quality_item(doc: dict) -> str:
+    q, what = fit_quality(doc)
+    return f"<li>fit quality, {html.escape(what)}" + (f": {html.escape(q)}" if q != "–" else "") + "</li>"
+
+
 def capture_section(result: CaptureResult) -> None:
     """One capture: parameters with units and intervals, error models, correlations, then the figures.
 
@@ -302,7 +325,9 @@ def capture_section(result: CaptureResult) -> None:
     rgb = ", ".join(f"{v:.4f} ± {s:.2g}" for v, s in zip(p["rho_d"], e["rho_d"]))
     items = (
         f"<li>ρd (R, G, B; linear, sRGB primaries, white E; dimensionless) = {rgb}</li>"
-        f"<li>ρs (dimensionless) = {_pm(*result.value('rho_s'))}{_rho_s_source(doc)}</li>" + _alpha_intervals(result)
+        f"<li>ρs (dimensionless) = {_pm(*result.value('rho_s'))}{_rho_s_source(doc)}</li>"
+        + _alpha_intervals(result)
+        + _quality_item(doc)
     )
     _display(
         _html(

@@ -6,9 +6,10 @@ What the report reads of each finished capture (``<name>/`` in the folder of fit
   ``normalization`` as text; ``params`` and ``stderr`` each holding ``rho_d``
   (3 numbers), ``rho_s`` (1 or 3), ``alpha_x``, ``alpha_y`` (finite numbers:
   the report prints each; every ``stderr`` ≥ 0); ``fit`` a table whose optional
-  ``status`` is text, ``reduced_chi2`` a number, ``covariance.parameters``
-  names of shared parameters, ``diagnostics.errors`` the 1-σ of each by each
-  error model, ``posterior`` the α median, intervals, acceptance and τ;
+  ``status`` is text, ``reduced_chi2`` a number, ``weighted`` a boolean,
+  ``covariance.parameters`` names of shared parameters, ``diagnostics.errors``
+  the 1-σ of each by each error model, ``diagnostics.residuals`` the RMS
+  residual (sr⁻¹ and relative), ``posterior`` the α median, intervals, acceptance and τ;
 * ``residuals.npz`` (optional): ``f_r`` and ``model`` of one ``(h, w, 3)``
   shape, ``binning`` a whole number ≥ 1, ``origin`` two whole numbers;
 * ``posterior.npz`` (optional): ``alpha`` (and any other chain) of one
@@ -97,13 +98,22 @@ class _Errors(_Open):
     model: list[_Err]
 
 
+class _Residuals(_Open):
+    """``fit.diagnostics.residuals``: RMS of measured − fitted f_r (sr⁻¹) and as a share of the mean f_r."""
+
+    rms: _Err
+    relative_rms: Annotated[float, Strict(), Field(ge=0)]  # NaN where the mean f_r is 0
+
+
 class _Diagnostics(_Open):
     errors: _Errors | None = None
+    residuals: _Residuals | None = None
 
 
 class _Fit(_Open):
     status: str | None = None
     reduced_chi2: _Num | None = None
+    weighted: Annotated[bool, Strict()] | None = None
     covariance: _Covariance | None = None
     diagnostics: _Diagnostics | None = None
     posterior: _Posterior | None = None

@@ -35,7 +35,7 @@ from pathlib import Path
 
 from .._files import commit_folder, recover_commit, remove_temporaries, sha256, write_bytes_atomic
 from ..capture import CAPTURE_FILE, CaptureError, load_capture
-from ..export import write_capture_outputs
+from ..export import FIT_QUALITY_COLUMNS, fit_quality, write_capture_outputs
 from ._fit_capture import fit_capture
 from ._fit_photo import fit_photo_outputs
 from ._progress import stage
@@ -62,7 +62,7 @@ SUMMARY_COLUMNS = (
     "alpha_x_err",
     "alpha_y_err",
     "fit_status",
-    "reduced_chi2",
+    *FIT_QUALITY_COLUMNS,
     "valid_pixels",
     "error",
     "source",
@@ -212,8 +212,8 @@ def _row(item: BatchItem) -> dict:
             model=d["model"],
             normalization=d["normalization"],
             fit_status=d["fit"]["status"],
-            # methods without a least-squares fit (smartphone) have neither
-            reduced_chi2=_num(d["fit"].get("reduced_chi2")),
+            # weighted χ²/dof, or a unit-weight fit's RMS residual; none for the smartphone method
+            **{k: _num(v) for k, v in fit_quality(d["fit"]).items()},
             valid_pixels=d["fit"].get("diagnostics", {}).get("pixels", {}).get("valid", ""),
         )
         for src, suffix in ((p, ""), (e, "_err")):

@@ -282,7 +282,7 @@ def fit_cmd(
         from rich.table import Table
 
         t = Table(title=f"{len(items)} capture(s) → {out_dir}/summary.csv")
-        for col in ("capture", "status", "ρs", "αx", "αy", "residual variance (sr⁻², unit weights)"):
+        for col in ("capture", "status", "ρs", "αx", "αy", "fit quality"):
             t.add_column(col)
         for it in items:
             if it.params:
@@ -291,14 +291,17 @@ def fit_cmd(
                 if post := it.params["fit"].get("posterior"):  # a skewed posterior: median [68 % interval]
                     lo, hi = post["alpha_interval_68"]
                     pm = lambda k: f"{p[k]:.4f} [{lo:.4f}, {hi:.4f}]" if k.startswith("alpha") else _pm(p[k], e[k])
-                rc = it.params["fit"].get("reduced_chi2")  # none for the smartphone method
+                from ..export import fit_quality  # weighted χ²/dof, or a unit-weight fit's RMS residual
+
+                q = fit_quality(it.params["fit"])
+                chi, rms = q["weighted_chi2_per_dof"], q["residual_rms_sr-1"]
                 t.add_row(
                     it.name,
                     "skipped (done)" if it.skipped else "ok",
                     pm("rho_s"),
                     pm("alpha_x"),
                     pm("alpha_y"),
-                    f"{rc:.3g}" if rc is not None else "–",
+                    f"χ²/dof {chi:.3g}" if chi is not None else f"RMS {rms:.2g} sr⁻¹" if rms is not None else "–",
                 )
             else:
                 t.add_row(it.name, "[red]error[/]", "", "", "", "")

@@ -271,6 +271,7 @@ def write_photo_outputs(fit: PhotoFit, out_dir, *, created: str) -> dict:
     fit_doc = {
         "status": "converged",
         "reduced_chi2": chi2 / dof if dof > 0 else None,
+        "weighted": True,  # 1/σ² from the noise model: a χ²/dof (wardjax.export.fit_quality)
         "chi2": chi2,
         "dof": dof,
         "lobe": getattr(res, "lobe", cap.config.fit.lobe),
