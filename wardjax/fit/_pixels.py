@@ -23,7 +23,11 @@ that is
 ``normals=True`` adds a normal per pixel (:mod:`._pixel_normals`); a pixel
 keeps its normal where it lowers its χ² by more than ``2 ln n`` (BIC), else it
 stays flat. With clusters each pixel's normal is fitted under every lobe and
-the pixel takes the (lobe, normal) of lowest cost, alternated with the lobes.
+the pixel takes the (lobe, normal) of lowest cost; then the lobes and the
+normals are refined together (:mod:`._pixel_joint`: Gauss–Newton on the lobes
+with each pixel's ρd and slopes eliminated), and the two alternate. Refitting
+the lobes with the normals held fixed instead stops short of the optimum: a
+tilt and a lobe width trade off.
 
 Standard errors are Gauss–Newton (the curvature of χ²); with ``weights``
 (``1/σ²``) they are taken as given, without them every variance is scaled by
@@ -44,6 +48,7 @@ from jaxtyping import Array, ArrayLike, Float
 from ..ward import NORMALIZATIONS
 from . import _pixel_model as pm
 from ._data import check_choice
+from ._pixel_joint import reduced_system
 from ._pixel_normals import fit_normals, normal_from_slopes, normal_jacobian
 from ._scanline import fit_scanlines
 
@@ -54,7 +59,8 @@ MODELS = ("isotropic", "anisotropic")
 MAX_CLUSTERS = 4  # the largest count tried when the data choose it
 _SUBSAMPLE = 4096  # pixels fitted alone to seed the clusters
 _EM_ROUNDS = 4
-_NORMAL_ROUNDS = 6  # alternations of (labels, normals) with the lobes
+_NORMAL_ROUNDS = 2  # alternations of (labels, normals) with the lobes
+_JOINT_STEPS = 4  # Gauss–Newton steps on lobes and normals together
 _STEPS = 8  # Levenberg–Marquardt steps per lobe fit (one compiled program for every call)
 
 
@@ -262,9 +268,10 @@ def _clusters(data, geom, shared, d, n_clusters, seed, normalization, ln_n):
     return theta, s, labels, {"bic": bic, "n_clusters": k}
 
 
-def _labels_with_normals(theta, s, labels, data, t, normalization, ln_n):
+def _labels_with_normals(theta, s, labels, data, t, normalization, ln_n, g0=None):
     """Each pixel's normal fitted under every lobe; the pixel takes the lobe (and normal) of lowest
     ``χ²_pl − 2 log π_l`` (``π`` the current shares). A normal is kept where it lowers χ² by ``2 ln n``.
+    ``g0 (P, 2)``: slopes to start from (default: the grid of :mod:`._pixel_normals`).
 
     Returns ``labels``, the normal map, which pixels keep a normal, and the ``(a, g)`` covariances.
     """
@@ -282,6 +289,7 @@ def _labels_with_normals(theta, s, labels, data, t, normalization, ln_n):
             jnp.broadcast_to(s[i], (p,)),
             t,
             normalization,
+            g0,
         )
         for i in range(k)
     ]
@@ -294,6 +302,45 @@ def _labels_with_normals(theta, s, labels, data, t, normalization, ln_n):
     g, c_flat, c_fit, cov = pick(0), pick(2), pick(3), pick(4)
     keep = (c_flat - c_fit) > 2.0 * ln_n
     return labels, normal_from_slopes(jnp.where(keep[:, None], g, 0.0)), keep, cov
+
+
+def _slopes(normal_map):
+    return -normal_map[:, :2] / normal_map[:, 2:]
+
+
+def _lobe_sums(x, labels, n_lobes):
+    return jax.ops.segment_sum(x, labels, num_segments=n_lobes)
+
+
+def _refine_jointly(theta, s, labels, normal_map, data, t, normalization, ln_n, steps=_JOINT_STEPS):
+    """Gauss–Newton steps on the lobes with each pixel's ``(ρd, slopes)`` eliminated (:mod:`._pixel_joint`).
+
+    After each step the slopes are refitted from where they were; a lobe keeps its step where it lowers
+    its χ². Returns ``theta``, ``s``, the normal map, which pixels keep a normal, and the ``(a, g)`` covariances.
+    """
+    f, w, wi, wo = data
+    n_lobes, d = int(theta.shape[0]), int(theta.shape[1])
+    g = _slopes(normal_map)
+    out = fit_normals(f, w, wi, wo, theta[labels], s[labels], t, normalization, g, grid=False)
+    for _ in range(steps):
+        g, a = out[0], out[1]
+        chi_l = _lobe_sums(out[3], labels, n_lobes)
+        info, grad = reduced_system(
+            f, w, wi, wo, a, g, theta, s, labels, t, normalization=normalization, n_lobes=n_lobes
+        )
+        damped = (
+            info + 1e-6 * jnp.eye(1 + d)[None] * jnp.maximum(jnp.diagonal(info, axis1=1, axis2=2), 1e-300)[:, :, None]
+        )
+        delta = jnp.nan_to_num(jnp.linalg.solve(damped, -grad[..., None])[..., 0])
+        s_new = jnp.maximum(s + delta[:, 0], 0.0)
+        th_new = jnp.clip(theta + jnp.clip(delta[:, 1:], -0.5, 0.5), pm.LOG_ALPHA_MIN, pm.LOG_ALPHA_MAX)
+        trial = fit_normals(f, w, wi, wo, th_new[labels], s_new[labels], t, normalization, g, grid=False)
+        ok = _lobe_sums(trial[3], labels, n_lobes) < chi_l
+        theta, s = jnp.where(ok[:, None], th_new, theta), jnp.where(ok, s_new, s)
+        out = tuple(jnp.where(ok[labels].reshape((-1,) + (1,) * (x.ndim - 1)), y, x) for x, y in zip(out, trial))
+    g, _, c_flat, c_fit, cov = out
+    keep = (c_flat - c_fit) > 2.0 * ln_n
+    return theta, s, normal_from_slopes(jnp.where(keep[:, None], g, 0.0)), keep, cov
 
 
 def _pixel_lobes(data, geom, shared, model, normalization, ln_n, d):
@@ -429,12 +476,22 @@ def _fit(f, wi, wo, w, t, lobe, model, n_clusters, normals, normalization, seed,
         theta_flat, s_flat, _ = pm.lobe_fit(theta, labels, flat, f, w, n_lobes=n_lobes, steps=_STEPS)
         before = float(jnp.sum(_pixel_chi2(theta_flat, s_flat, labels, flat, f, w)))
         if lobe == "clusters" and n_lobes > 1:
+            g_start = None  # the grid in the first round, then the grid and each pixel's current slopes
             for _ in range(_NORMAL_ROUNDS):  # each pixel's label and normal chosen together, then the lobes
-                labels, normal_map, keep, cov_ag = _labels_with_normals(theta, s, labels, data, t, normalization, ln_n)
-                geom = _geometry(wi, wo, normal_map, t, normalization)
-                theta, s, _ = pm.lobe_fit(theta, labels, geom, f, w, n_lobes=n_lobes, steps=_STEPS)
+                labels, normal_map, keep, cov_ag = _labels_with_normals(
+                    theta, s, labels, data, t, normalization, ln_n, g_start
+                )
+                theta, s, normal_map, keep, cov_ag = _refine_jointly(
+                    theta, s, labels, normal_map, data, t, normalization, ln_n
+                )
+                g_start = _slopes(normal_map)
+            geom = _geometry(wi, wo, normal_map, t, normalization)
         else:
             theta, s, geom, normal_map, keep, cov_ag = with_normals(theta, s, labels, geom)
+            theta, s, normal_map, keep, cov_ag = _refine_jointly(
+                theta, s, labels, normal_map, data, t, normalization, ln_n
+            )
+            geom = _geometry(wi, wo, normal_map, t, normalization)
         after = float(jnp.sum(_pixel_chi2(theta, s, labels, geom, f, w)))
         n_keep = int(jnp.sum(keep))
         evidence["normals"] = {
