@@ -31,7 +31,8 @@ tilt and a lobe width trade off.
 
 Standard errors are Gauss–Newton (the curvature of χ²); with ``weights``
 (``1/σ²``) they are taken as given, without them every variance is scaled by
-``χ²/dof``.
+``χ²/dof``. With normals a lobe's covariance is that of the reduced system of
+:mod:`._pixel_joint` (every pixel's ρd and slopes free).
 """
 
 from __future__ import annotations
@@ -343,6 +344,15 @@ def _refine_jointly(theta, s, labels, normal_map, data, t, normalization, ln_n, 
     return theta, s, normal_from_slopes(jnp.where(keep[:, None], g, 0.0)), keep, cov
 
 
+def _lobe_covariance_with_normals(a, theta, s, labels, normal_map, data, t, normalization):
+    """``(L, 1+d, 1+d)`` the lobes' covariance in ``(ρs, θ)`` with every pixel's ``(ρd, slopes)`` free."""
+    f, w, wi, wo = data
+    info, _ = reduced_system(
+        f, w, wi, wo, a, _slopes(normal_map), theta, s, labels, t, normalization=normalization, n_lobes=theta.shape[0]
+    )
+    return jnp.linalg.inv(info)
+
+
 def _pixel_lobes(data, geom, shared, model, normalization, ln_n, d):
     """Per-pixel lobes where certified and worth their BIC; label 0 is the shared lobe."""
     f, w, wi, wo = data
@@ -507,6 +517,7 @@ def _fit(f, wi, wo, w, t, lobe, model, n_clusters, normals, normalization, seed,
     if normals and cov_ag is not None:
         var_a = jnp.where(keep[:, None], var_a - inv_sq + jnp.diagonal(cov_ag, axis1=1, axis2=2)[:, :c], var_a)
         slopes_var = jnp.where(keep[:, None, None], cov_ag[:, c:, c:], 0.0)
+        cov_lobe = _lobe_covariance_with_normals(a, theta, s, labels, normal_map, data, t, normalization)
     chi2 = float(jnp.sum(pix_chi2))
     valid_pixels = int(jnp.sum(jnp.any(w > 0, (1, 2))))
     n_par = valid_pixels * c + n_lobes * (1 + d) + 2 * int(jnp.sum(keep))
