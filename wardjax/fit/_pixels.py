@@ -27,7 +27,9 @@ the pixel takes the (lobe, normal) of lowest cost; then the lobes and the
 normals are refined together (:mod:`._pixel_joint`: Gauss–Newton on the lobes
 with each pixel's ρd and slopes eliminated), and the two alternate. Refitting
 the lobes with the normals held fixed instead stops short of the optimum: a
-tilt and a lobe width trade off.
+tilt and a lobe width trade off. Last, lobes are dropped while that lowers the
+BIC with each pixel's normal refitted under its new lobe (the count chosen
+again with normals in the model).
 
 Standard errors are Gauss–Newton (the curvature of χ²); with ``weights``
 (``1/σ²``) they are taken as given, without them every variance is scaled by
@@ -344,6 +346,58 @@ def _refine_jointly(theta, s, labels, normal_map, data, t, normalization, ln_n, 
     return theta, s, normal_from_slopes(jnp.where(keep[:, None], g, 0.0)), keep, cov
 
 
+def _prune_lobes(theta, s, labels, normal_map, data, t, normalization, ln_n):
+    """Drop lobes that no longer earn their BIC once normals are fitted; returns the pruned state.
+
+    Clusters are chosen on normals fitted under one shared lobe, which leave some lobe variation
+    unexplained; once each pixel's normal is fitted under its own lobe, a cluster may stand for
+    nothing. Each round fits every pixel's normal under every lobe (from its current slopes), and
+    removes the lobe whose pixels, moved to the best other lobe, lower ``χ² + (k(1+d) + k − 1) ln n``
+    the most; until none does.
+    """
+    f, w, wi, wo = data
+    p, d = f.shape[0], int(theta.shape[1])
+    keep = cov = None
+    while theta.shape[0] > 1:
+        k = int(theta.shape[0])
+        g0 = _slopes(normal_map)
+        fits = [
+            fit_normals(
+                f,
+                w,
+                wi,
+                wo,
+                jnp.broadcast_to(theta[i], (p, d)),
+                jnp.broadcast_to(s[i], (p,)),
+                t,
+                normalization,
+                g0,
+                grid=False,
+            )
+            for i in range(k)
+        ]
+        cost = np.asarray(jnp.stack([jnp.minimum(fl[2], fl[3]) for fl in fits], 1))
+
+        def bic(cols):
+            m = len(cols)
+            return float(np.sum(np.min(cost[:, cols], 1))) + (m * (1 + d) + m - 1) * ln_n
+
+        now = bic(list(range(k)))
+        drops = [bic([j for j in range(k) if j != i]) for i in range(k)]
+        i = int(np.argmin(drops))
+        if drops[i] >= now:
+            break
+        rest = [j for j in range(k) if j != i]
+        new = np.asarray(rest)[np.argmin(cost[:, rest], 1)]
+        labels = jnp.asarray(np.searchsorted(rest, new).astype(np.int32))
+        g = jnp.stack([fl[0] for fl in fits], 1)[jnp.arange(p), jnp.asarray(new)]
+        theta, s = theta[jnp.asarray(rest)], s[jnp.asarray(rest)]
+        theta, s, normal_map, keep, cov = _refine_jointly(
+            theta, s, labels, normal_from_slopes(g), data, t, normalization, ln_n
+        )
+    return theta, s, labels, normal_map, keep, cov
+
+
 def _lobe_covariance_with_normals(a, theta, s, labels, normal_map, data, t, normalization):
     """``(L, 1+d, 1+d)`` the lobes' covariance in ``(ρs, θ)`` with every pixel's ``(ρd, slopes)`` free."""
     f, w, wi, wo = data
@@ -495,6 +549,13 @@ def _fit(f, wi, wo, w, t, lobe, model, n_clusters, normals, normalization, seed,
                     theta, s, labels, normal_map, data, t, normalization, ln_n
                 )
                 g_start = _slopes(normal_map)
+            theta, s, labels, normal_map, kept, cov = _prune_lobes(
+                theta, s, labels, normal_map, data, t, normalization, ln_n
+            )
+            if kept is not None:
+                keep, cov_ag = kept, cov
+            n_lobes = int(theta.shape[0])
+            evidence["clusters"]["n_clusters_with_normals"] = n_lobes
             geom = _geometry(wi, wo, normal_map, t, normalization)
         else:
             theta, s, geom, normal_map, keep, cov_ag = with_normals(theta, s, labels, geom)
