@@ -398,6 +398,20 @@ def _prune_lobes(theta, s, labels, normal_map, data, t, normalization, ln_n):
     return theta, s, labels, normal_map, keep, cov
 
 
+def _clusters_with_normals(theta, s, labels, data, t, normalization, ln_n):
+    """Labels, normals and lobes of ``lobe="clusters"`` with normals (module docstring); returns
+    ``theta``, ``s``, ``labels``, the normal map, which pixels keep a normal and the ``(a, g)`` covariances."""
+    g_start = None  # the grid in the first round, then the grid and each pixel's current slopes
+    for _ in range(_NORMAL_ROUNDS):  # each pixel's label and normal chosen together, then the lobes
+        labels, normal_map, keep, cov_ag = _labels_with_normals(theta, s, labels, data, t, normalization, ln_n, g_start)
+        theta, s, normal_map, keep, cov_ag = _refine_jointly(theta, s, labels, normal_map, data, t, normalization, ln_n)
+        g_start = _slopes(normal_map)
+    theta, s, labels, normal_map, kept, cov = _prune_lobes(theta, s, labels, normal_map, data, t, normalization, ln_n)
+    if kept is not None:
+        keep, cov_ag = kept, cov
+    return theta, s, labels, normal_map, keep, cov_ag
+
+
 def _lobe_covariance_with_normals(a, theta, s, labels, normal_map, data, t, normalization):
     """``(L, 1+d, 1+d)`` the lobes' covariance in ``(ρs, θ)`` with every pixel's ``(ρd, slopes)`` free."""
     f, w, wi, wo = data
@@ -540,20 +554,9 @@ def _fit(f, wi, wo, w, t, lobe, model, n_clusters, normals, normalization, seed,
         theta_flat, s_flat, _ = pm.lobe_fit(theta, labels, flat, f, w, n_lobes=n_lobes, steps=_STEPS)
         before = float(jnp.sum(_pixel_chi2(theta_flat, s_flat, labels, flat, f, w)))
         if lobe == "clusters" and n_lobes > 1:
-            g_start = None  # the grid in the first round, then the grid and each pixel's current slopes
-            for _ in range(_NORMAL_ROUNDS):  # each pixel's label and normal chosen together, then the lobes
-                labels, normal_map, keep, cov_ag = _labels_with_normals(
-                    theta, s, labels, data, t, normalization, ln_n, g_start
-                )
-                theta, s, normal_map, keep, cov_ag = _refine_jointly(
-                    theta, s, labels, normal_map, data, t, normalization, ln_n
-                )
-                g_start = _slopes(normal_map)
-            theta, s, labels, normal_map, kept, cov = _prune_lobes(
-                theta, s, labels, normal_map, data, t, normalization, ln_n
+            theta, s, labels, normal_map, keep, cov_ag = _clusters_with_normals(
+                theta, s, labels, data, t, normalization, ln_n
             )
-            if kept is not None:
-                keep, cov_ag = kept, cov
             n_lobes = int(theta.shape[0])
             evidence["clusters"]["n_clusters_with_normals"] = n_lobes
             geom = _geometry(wi, wo, normal_map, t, normalization)
