@@ -1,6 +1,6 @@
 """Held-out-photo error as effects are added: shared lobe → per-cluster lobes → + normals.
 
-    python -m benchmarks.svbrdf_table [--size 32] [--hold-out 0 4] [--renderer radiance]
+    python -m benchmarks.svbrdf_table [--size 32] [--hold-out 0 4] [--renderer radiance] [--out FILE]
 
 Radiance renders (or wardjax's forward model) of :func:`wardjax.render.flash_views`:
 9 flash photos of a checkerboard of two materials (ρs 0.06 / 0.12, α 0.08 / 0.2)
@@ -9,6 +9,7 @@ For each held-out photo, :func:`wardjax.fit_pixels` fits the other 8 with each
 model and :func:`wardjax.predict_pixels` renders the held-out one; the table
 gives its RMSE over the noise's RMS (1 is the floor), the lobes found, the
 cluster labels right, and the robust SD of ρd's z-scores against the truth.
+``--out`` also writes the table, after a provenance line (commit, machine, load, date).
 """
 
 from __future__ import annotations
@@ -32,7 +33,14 @@ def main(argv=None) -> None:
     ap.add_argument("--hold-out", type=int, nargs="+", default=[0, 4], help="photos held out in turn")
     ap.add_argument("--renderer", choices=("radiance", "wardjax"), default="radiance")
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--out", help="also write the table here (markdown, with its provenance)")
     args = ap.parse_args(argv)
+    lines: list[str] = []
+
+    def emit(line: str) -> None:
+        print(line, flush=True)
+        lines.append(line)
+
     import wardjax as wj
     from wardjax.render import flash_views, radiance_render_flash_views, render_flash_views
     from wardjax.simulate import flash_views_data
@@ -41,12 +49,14 @@ def main(argv=None) -> None:
     images = radiance_render_flash_views(scene) if args.renderer == "radiance" else render_flash_views(scene)
     data = flash_views_data(scene, images=images, seed=args.seed)
     truth_labels = scene.labels().ravel()
-    print(
+    emit(
         f"# {args.renderer} renders, {args.size}×{args.size} pixels, {scene.n_views} flash photos; "
-        f"truth ρs {tuple(scene.rho_s)} α {tuple(scene.alpha)}"
+        f"truth ρs {tuple(scene.rho_s.tolist())} α {tuple(scene.alpha.tolist())}; "
+        f"command: python -m benchmarks.svbrdf_table --size {args.size} --hold-out "
+        f"{' '.join(map(str, args.hold_out))} --renderer {args.renderer} --seed {args.seed}"
     )
-    print("| held out | model | held-out RMSE / noise | lobes (ρs, α) | labels right | ρd z robust SD | χ²/dof |")
-    print("|---|---|---|---|---|---|---|")
+    emit("| held out | model | held-out RMSE / noise | lobes (ρs, α) | labels right | ρd z robust SD | χ²/dof |")
+    emit("|---|---|---|---|---|---|---|")
     for k in args.hold_out:
         keep = [i for i in range(scene.n_views) if i != k]
         noise = np.sqrt(np.mean(data.sigma[:, k] ** 2))
@@ -69,10 +79,13 @@ def main(argv=None) -> None:
                 else float("nan")
             )
             z = robust_sd((res.rho_d - scene.true_rho_d().reshape(-1, 3)) / res.stderr.rho_d)
-            print(
-                f"| {k} | {name} | {rmse / noise:.3f} | {lobes} | {acc:.3f} | {z:.2f} | {res.reduced_chi2:.2f} |",
-                flush=True,
-            )
+            emit(f"| {k} | {name} | {rmse / noise:.3f} | {lobes} | {acc:.3f} | {z:.2f} | {res.reduced_chi2:.2f} |")
+    if args.out:
+        from pathlib import Path
+
+        from .textured_bench import provenance
+
+        Path(args.out).write_text(provenance() + "\n".join(lines) + "\n")
 
 
 if __name__ == "__main__":

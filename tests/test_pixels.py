@@ -101,11 +101,14 @@ def test_pixel_lobes_where_the_highlight_is_seen():
 
 @pytest.mark.slow
 def test_clusters_and_normals_on_radiance_renders():
-    """Two materials and a bump map rendered by Radiance: lobes, labels, σ, and the held-out photo's error falls."""
+    """Two materials and a bump map rendered by Radiance, the centre photo held out: lobes within 5 % of the
+    truth, labels ≥ 95 % right, ρd's σ calibrated, and the held-out photo predicted to within 1.3× its noise
+    (with the true lobes and normals it is 1.07: its own noise plus that of each pixel's ρd from the other 8)."""
     scene = flash_views((32, 32))
     images = radiance_render_flash_views(scene)
-    data = flash_views_data(scene, images=images, seed=5)
-    fit_views = slice(1, None)
+    data = flash_views_data(scene, images=images, seed=0)
+    held = 4
+    fit_views = [k for k in range(scene.n_views) if k != held]
     w = data.sigma[:, fit_views] ** -2
     res = wj.fit_pixels(
         data.f_r[:, fit_views],
@@ -116,19 +119,13 @@ def test_clusters_and_normals_on_radiance_renders():
         normals=True,
         normalization=NORM,
     )
+    assert res.n_lobes == 2, res.evidence
     order = np.argsort(res.alpha_x)
     np.testing.assert_allclose(res.rho_s[order], scene.rho_s, rtol=0.05)
     np.testing.assert_allclose(res.alpha_x[order], scene.alpha, rtol=0.05)
     assert label_accuracy(res.labels, scene.labels().ravel()) >= 0.95
     z = (res.rho_d - scene.true_rho_d().reshape(-1, 3)) / res.stderr.rho_d
     assert 0.8 < robust_sd(z) < 1.25
-    # The held-out photo is predicted better with normals than by the shared lobe alone.
-    flat = wj.fit_pixels(
-        data.f_r[:, fit_views], data.wi[:, fit_views], data.wo[:, fit_views], weights=w, normalization=NORM
-    )
-
-    def held_out_rmse(r):
-        pred = np.asarray(wj.predict_pixels(r, data.wi[:, :1], data.wo[:, :1]))
-        return np.sqrt(np.mean((pred - data.f_r[:, :1]) ** 2))
-
-    assert held_out_rmse(res) < 0.5 * held_out_rmse(flat)
+    pred = np.asarray(wj.predict_pixels(res, data.wi[:, [held]], data.wo[:, [held]]))[:, 0]
+    rmse = np.sqrt(np.mean((pred - data.f_r[:, held]) ** 2))
+    assert rmse / np.sqrt(np.mean(data.sigma[:, held] ** 2)) < 1.3

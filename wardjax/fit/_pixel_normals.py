@@ -5,8 +5,14 @@ field). For fixed ``g`` the pixel's model (:mod:`._pixel_model`)
 ``f ≈ q(g) a + s B(g)`` is linear in ``a = ρd/π``, so Levenberg–Marquardt runs
 on the two slopes alone with ``a`` in closed form (variable projection), the
 same fixed number of steps for every pixel (no data-dependent loop under
-``vmap``), started from the best of a grid of slopes; a step is kept only
-where it lowers the pixel's χ².
+``vmap``), started from the best of a grid of slopes (and from given slopes:
+a warm start); a step is kept only where it lowers the pixel's χ².
+
+The grid must resolve the lobe. A normal tilted by ``δ`` moves the half-vector
+by ``δ`` in the lobe's ``tan θh``, so χ² near the true slopes is a valley about
+``α`` wide; between valleys lies a plateau, the normals that hide the highlight
+from every photo, where the diffuse term alone fits. On a grid coarser than the
+valley the plateau wins and LM, whose gradient vanishes there, cannot leave it.
 
 Covariance: the Gauss–Newton inverse of ``JᵀJ`` over ``(a, g)`` of the pixel's
 weighted residuals, with the lobe held fixed.
@@ -25,11 +31,12 @@ from ._pixel_model import basis, geometry
 __all__ = ["MAX_SLOPE", "fit_normals", "normal_from_slopes", "normal_jacobian"]
 
 MAX_SLOPE = 1.0  # 45°: beyond this a bump is a facet the flat-sample geometry no longer describes
-_STEPS = 24
-_RESTARTS = 4  # LM runs from the best four grid points; the lowest χ² wins
-# Starting slopes: a 13 × 13 grid over ±0.3 (±17°, 0.05 apart), the best of which starts LM — a highlight seen in
-# a few views makes the χ² of a tilt multimodal, and LM from the flat normal can stop in the wrong mode.
-_STARTS = tuple((a, b) for a in np.linspace(-0.3, 0.3, 13) for b in np.linspace(-0.3, 0.3, 13))
+_STEPS = 16
+_RESTARTS = 2  # LM runs from the best two grid points; the lowest χ² wins
+# Starting slopes: a 31 × 31 grid over ±0.3 (±17°, 0.02 apart, a quarter of the narrowest lobe of the renders,
+# α 0.08), the best of which start LM — a highlight seen in a few views makes the χ² of a tilt multimodal, and LM
+# from the flat normal, or from a grid point outside the valley, stops on the plateau (module docstring).
+_STARTS = tuple((a, b) for a in np.linspace(-0.3, 0.3, 31) for b in np.linspace(-0.3, 0.3, 31))
 
 
 def normal_from_slopes(g: jax.Array) -> jax.Array:
@@ -59,7 +66,7 @@ def _profiled_residual(g, f, w, wi, wo, theta, s, tangent, normalization):
     return r.reshape(-1), a
 
 
-def _one_pixel(f, w, wi, wo, theta, s, tangent, *, normalization):
+def _one_pixel(f, w, wi, wo, theta, s, tangent, g0, *, normalization, warm, grid):
     def res(g):
         return _profiled_residual(g, f, w, wi, wo, theta, s, tangent, normalization)[0]
 
@@ -68,9 +75,15 @@ def _one_pixel(f, w, wi, wo, theta, s, tangent, *, normalization):
         return jnp.sum(r * r)
 
     c_flat = cost(jnp.zeros(2, f.dtype))
-    starts = jnp.asarray(_STARTS, f.dtype)
-    c_starts = jax.vmap(cost)(starts)
-    best = jnp.argsort(c_starts)[:_RESTARTS]
+    starts, c_best = g0[None], cost(g0)[None]
+    if grid:
+        pts = jnp.asarray(_STARTS, f.dtype)
+        c_grid = jax.vmap(cost)(pts)
+        best = jnp.argsort(c_grid)[:_RESTARTS]
+        starts, c_best = pts[best], c_grid[best]
+        if warm:  # the given slopes join the grid's best
+            starts = jnp.concatenate([g0[None], starts], 0)
+            c_best = jnp.concatenate([cost(g0)[None], c_best], 0)
 
     def step(_, state):
         g, c, lam = state
@@ -84,10 +97,10 @@ def _one_pixel(f, w, wi, wo, theta, s, tangent, *, normalization):
         ok = jnp.isfinite(c_new) & (c_new < c)
         return jnp.where(ok, trial, g), jnp.where(ok, c_new, c), jnp.where(ok, 0.3 * lam, 10.0 * lam)
 
-    def run(g0, c0):
-        return jax.lax.fori_loop(0, _STEPS, step, (g0, c0, jnp.asarray(1e-3, f.dtype)))[:2]
+    def run(start, c0):
+        return jax.lax.fori_loop(0, _STEPS, step, (start, c0, jnp.asarray(1e-3, f.dtype)))[:2]
 
-    gs, cs = jax.vmap(run)(starts[best], c_starts[best])
+    gs, cs = jax.vmap(run)(starts, c_best)
     g, c = gs[jnp.argmin(cs)], jnp.min(cs)
     _, a = _profiled_residual(g, f, w, wi, wo, theta, s, tangent, normalization)
 
@@ -100,27 +113,33 @@ def _one_pixel(f, w, wi, wo, theta, s, tangent, *, normalization):
     return g, a, c_flat, c, cov
 
 
-@functools.partial(jax.jit, static_argnames=("normalization",))
-def _chunk(f, w, wi, wo, theta, s, tangent, *, normalization):
-    fn = functools.partial(_one_pixel, normalization=normalization)
-    return jax.vmap(fn, in_axes=(0, 0, 0, 0, 0, 0, None))(f, w, wi, wo, theta, s, tangent)
+@functools.partial(jax.jit, static_argnames=("normalization", "warm", "grid"))
+def _chunk(f, w, wi, wo, theta, s, g0, tangent, *, normalization, warm, grid):
+    fn = functools.partial(_one_pixel, normalization=normalization, warm=warm, grid=grid)
+    return jax.vmap(fn, in_axes=(0, 0, 0, 0, 0, 0, None, 0))(f, w, wi, wo, theta, s, tangent, g0)
 
 
-def fit_normals(f, w, wi, wo, theta_p, s_p, tangent, normalization: str, chunk: int = 32768):
+def fit_normals(
+    f, w, wi, wo, theta_p, s_p, tangent, normalization: str, g0=None, *, grid: bool = True, chunk: int = 32768
+):
     """Fit every pixel's slopes; arrays ``(P, …)``, processed in chunks of one compiled shape.
+
+    ``g0 (P, 2)``: slopes to start from as well as the grid's best (a warm start); with ``grid=False``
+    from them alone.
 
     Returns ``g (P, 2)``, ``a (P, C)``, ``χ²`` flat and fitted ``(P,)`` each, and the
     covariance ``(P, C+2, C+2)`` of ``(a, g)``.
     """
     n = f.shape[0]
     chunk = min(chunk, n)
+    start_g = jnp.zeros((n, 2), f.dtype) if g0 is None else jnp.asarray(g0, f.dtype)
     outs = []
     for start in range(0, n, chunk):
         sl = slice(start, min(start + chunk, n))
-        parts = [x[sl] for x in (f, w, wi, wo, theta_p, s_p)]
+        parts = [x[sl] for x in (f, w, wi, wo, theta_p, s_p, start_g)]
         pad = chunk - parts[0].shape[0]
         if pad:
             parts = [jnp.concatenate([x, jnp.repeat(x[-1:], pad, 0)], 0) for x in parts]
-        out = _chunk(*parts, tangent, normalization=normalization)
+        out = _chunk(*parts, tangent, normalization=normalization, warm=g0 is not None, grid=grid or g0 is None)
         outs.append([o[: chunk - pad] for o in out])
     return tuple(jnp.concatenate([o[i] for o in outs], 0) for i in range(5))

@@ -23,11 +23,18 @@ that is
 ``normals=True`` adds a normal per pixel (:mod:`._pixel_normals`); a pixel
 keeps its normal where it lowers its χ² by more than ``2 ln n`` (BIC), else it
 stays flat. With clusters each pixel's normal is fitted under every lobe and
-the pixel takes the (lobe, normal) of lowest cost, alternated with the lobes.
+the pixel takes the (lobe, normal) of lowest cost; then the lobes and the
+normals are refined together (:mod:`._pixel_joint`: Gauss–Newton on the lobes
+with each pixel's ρd and slopes eliminated), and the two alternate. Refitting
+the lobes with the normals held fixed instead stops short of the optimum: a
+tilt and a lobe width trade off. Last, lobes are dropped while that lowers the
+BIC with each pixel's normal refitted under its new lobe (the count chosen
+again with normals in the model).
 
 Standard errors are Gauss–Newton (the curvature of χ²); with ``weights``
 (``1/σ²``) they are taken as given, without them every variance is scaled by
-``χ²/dof``.
+``χ²/dof``. With normals a lobe's covariance is that of the reduced system of
+:mod:`._pixel_joint` (every pixel's ρd and slopes free).
 """
 
 from __future__ import annotations
@@ -44,6 +51,7 @@ from jaxtyping import Array, ArrayLike, Float
 from ..ward import NORMALIZATIONS
 from . import _pixel_model as pm
 from ._data import check_choice
+from ._pixel_joint import reduced_system
 from ._pixel_normals import fit_normals, normal_from_slopes, normal_jacobian
 from ._scanline import fit_scanlines
 
@@ -54,7 +62,8 @@ MODELS = ("isotropic", "anisotropic")
 MAX_CLUSTERS = 4  # the largest count tried when the data choose it
 _SUBSAMPLE = 4096  # pixels fitted alone to seed the clusters
 _EM_ROUNDS = 4
-_NORMAL_ROUNDS = 6  # alternations of (labels, normals) with the lobes
+_NORMAL_ROUNDS = 2  # alternations of (labels, normals) with the lobes
+_JOINT_STEPS = 4  # Gauss–Newton steps on lobes and normals together
 _STEPS = 8  # Levenberg–Marquardt steps per lobe fit (one compiled program for every call)
 
 
@@ -262,9 +271,10 @@ def _clusters(data, geom, shared, d, n_clusters, seed, normalization, ln_n):
     return theta, s, labels, {"bic": bic, "n_clusters": k}
 
 
-def _labels_with_normals(theta, s, labels, data, t, normalization, ln_n):
+def _labels_with_normals(theta, s, labels, data, t, normalization, ln_n, g0=None):
     """Each pixel's normal fitted under every lobe; the pixel takes the lobe (and normal) of lowest
     ``χ²_pl − 2 log π_l`` (``π`` the current shares). A normal is kept where it lowers χ² by ``2 ln n``.
+    ``g0 (P, 2)``: slopes to start from (default: the grid of :mod:`._pixel_normals`).
 
     Returns ``labels``, the normal map, which pixels keep a normal, and the ``(a, g)`` covariances.
     """
@@ -282,6 +292,7 @@ def _labels_with_normals(theta, s, labels, data, t, normalization, ln_n):
             jnp.broadcast_to(s[i], (p,)),
             t,
             normalization,
+            g0,
         )
         for i in range(k)
     ]
@@ -294,6 +305,120 @@ def _labels_with_normals(theta, s, labels, data, t, normalization, ln_n):
     g, c_flat, c_fit, cov = pick(0), pick(2), pick(3), pick(4)
     keep = (c_flat - c_fit) > 2.0 * ln_n
     return labels, normal_from_slopes(jnp.where(keep[:, None], g, 0.0)), keep, cov
+
+
+def _slopes(normal_map):
+    return -normal_map[:, :2] / normal_map[:, 2:]
+
+
+def _lobe_sums(x, labels, n_lobes):
+    return jax.ops.segment_sum(x, labels, num_segments=n_lobes)
+
+
+def _refine_jointly(theta, s, labels, normal_map, data, t, normalization, ln_n, steps=_JOINT_STEPS):
+    """Gauss–Newton steps on the lobes with each pixel's ``(ρd, slopes)`` eliminated (:mod:`._pixel_joint`).
+
+    After each step the slopes are refitted from where they were; a lobe keeps its step where it lowers
+    its χ². Returns ``theta``, ``s``, the normal map, which pixels keep a normal, and the ``(a, g)`` covariances.
+    """
+    f, w, wi, wo = data
+    n_lobes, d = int(theta.shape[0]), int(theta.shape[1])
+    g = _slopes(normal_map)
+    out = fit_normals(f, w, wi, wo, theta[labels], s[labels], t, normalization, g, grid=False)
+    for _ in range(steps):
+        g, a = out[0], out[1]
+        chi_l = _lobe_sums(out[3], labels, n_lobes)
+        info, grad = reduced_system(
+            f, w, wi, wo, a, g, theta, s, labels, t, normalization=normalization, n_lobes=n_lobes
+        )
+        damped = (
+            info + 1e-6 * jnp.eye(1 + d)[None] * jnp.maximum(jnp.diagonal(info, axis1=1, axis2=2), 1e-300)[:, :, None]
+        )
+        delta = jnp.nan_to_num(jnp.linalg.solve(damped, -grad[..., None])[..., 0])
+        s_new = jnp.maximum(s + delta[:, 0], 0.0)
+        th_new = jnp.clip(theta + jnp.clip(delta[:, 1:], -0.5, 0.5), pm.LOG_ALPHA_MIN, pm.LOG_ALPHA_MAX)
+        trial = fit_normals(f, w, wi, wo, th_new[labels], s_new[labels], t, normalization, g, grid=False)
+        ok = _lobe_sums(trial[3], labels, n_lobes) < chi_l
+        theta, s = jnp.where(ok[:, None], th_new, theta), jnp.where(ok, s_new, s)
+        out = tuple(jnp.where(ok[labels].reshape((-1,) + (1,) * (x.ndim - 1)), y, x) for x, y in zip(out, trial))
+    g, _, c_flat, c_fit, cov = out
+    keep = (c_flat - c_fit) > 2.0 * ln_n
+    return theta, s, normal_from_slopes(jnp.where(keep[:, None], g, 0.0)), keep, cov
+
+
+def _prune_lobes(theta, s, labels, normal_map, data, t, normalization, ln_n):
+    """Drop lobes that no longer earn their BIC once normals are fitted; returns the pruned state.
+
+    Clusters are chosen on normals fitted under one shared lobe, which leave some lobe variation
+    unexplained; once each pixel's normal is fitted under its own lobe, a cluster may stand for
+    nothing. Each round fits every pixel's normal under every lobe (from its current slopes), and
+    removes the lobe whose pixels, moved to the best other lobe, lower ``χ² + (k(1+d) + k − 1) ln n``
+    the most; until none does.
+    """
+    f, w, wi, wo = data
+    p, d = f.shape[0], int(theta.shape[1])
+    keep = cov = None
+    while theta.shape[0] > 1:
+        k = int(theta.shape[0])
+        g0 = _slopes(normal_map)
+        fits = [
+            fit_normals(
+                f,
+                w,
+                wi,
+                wo,
+                jnp.broadcast_to(theta[i], (p, d)),
+                jnp.broadcast_to(s[i], (p,)),
+                t,
+                normalization,
+                g0,
+                grid=False,
+            )
+            for i in range(k)
+        ]
+        cost = np.asarray(jnp.stack([jnp.minimum(fl[2], fl[3]) for fl in fits], 1))
+
+        def bic(cols):
+            m = len(cols)
+            return float(np.sum(np.min(cost[:, cols], 1))) + (m * (1 + d) + m - 1) * ln_n
+
+        now = bic(list(range(k)))
+        drops = [bic([j for j in range(k) if j != i]) for i in range(k)]
+        i = int(np.argmin(drops))
+        if drops[i] >= now:
+            break
+        rest = [j for j in range(k) if j != i]
+        new = np.asarray(rest)[np.argmin(cost[:, rest], 1)]
+        labels = jnp.asarray(np.searchsorted(rest, new).astype(np.int32))
+        g = jnp.stack([fl[0] for fl in fits], 1)[jnp.arange(p), jnp.asarray(new)]
+        theta, s = theta[jnp.asarray(rest)], s[jnp.asarray(rest)]
+        theta, s, normal_map, keep, cov = _refine_jointly(
+            theta, s, labels, normal_from_slopes(g), data, t, normalization, ln_n
+        )
+    return theta, s, labels, normal_map, keep, cov
+
+
+def _clusters_with_normals(theta, s, labels, data, t, normalization, ln_n):
+    """Labels, normals and lobes of ``lobe="clusters"`` with normals (module docstring); returns
+    ``theta``, ``s``, ``labels``, the normal map, which pixels keep a normal and the ``(a, g)`` covariances."""
+    g_start = None  # the grid in the first round, then the grid and each pixel's current slopes
+    for _ in range(_NORMAL_ROUNDS):  # each pixel's label and normal chosen together, then the lobes
+        labels, normal_map, keep, cov_ag = _labels_with_normals(theta, s, labels, data, t, normalization, ln_n, g_start)
+        theta, s, normal_map, keep, cov_ag = _refine_jointly(theta, s, labels, normal_map, data, t, normalization, ln_n)
+        g_start = _slopes(normal_map)
+    theta, s, labels, normal_map, kept, cov = _prune_lobes(theta, s, labels, normal_map, data, t, normalization, ln_n)
+    if kept is not None:
+        keep, cov_ag = kept, cov
+    return theta, s, labels, normal_map, keep, cov_ag
+
+
+def _lobe_covariance_with_normals(a, theta, s, labels, normal_map, data, t, normalization):
+    """``(L, 1+d, 1+d)`` the lobes' covariance in ``(ρs, θ)`` with every pixel's ``(ρd, slopes)`` free."""
+    f, w, wi, wo = data
+    info, _ = reduced_system(
+        f, w, wi, wo, a, _slopes(normal_map), theta, s, labels, t, normalization=normalization, n_lobes=theta.shape[0]
+    )
+    return jnp.linalg.inv(info)
 
 
 def _pixel_lobes(data, geom, shared, model, normalization, ln_n, d):
@@ -429,12 +554,18 @@ def _fit(f, wi, wo, w, t, lobe, model, n_clusters, normals, normalization, seed,
         theta_flat, s_flat, _ = pm.lobe_fit(theta, labels, flat, f, w, n_lobes=n_lobes, steps=_STEPS)
         before = float(jnp.sum(_pixel_chi2(theta_flat, s_flat, labels, flat, f, w)))
         if lobe == "clusters" and n_lobes > 1:
-            for _ in range(_NORMAL_ROUNDS):  # each pixel's label and normal chosen together, then the lobes
-                labels, normal_map, keep, cov_ag = _labels_with_normals(theta, s, labels, data, t, normalization, ln_n)
-                geom = _geometry(wi, wo, normal_map, t, normalization)
-                theta, s, _ = pm.lobe_fit(theta, labels, geom, f, w, n_lobes=n_lobes, steps=_STEPS)
+            theta, s, labels, normal_map, keep, cov_ag = _clusters_with_normals(
+                theta, s, labels, data, t, normalization, ln_n
+            )
+            n_lobes = int(theta.shape[0])
+            evidence["clusters"]["n_clusters_with_normals"] = n_lobes
+            geom = _geometry(wi, wo, normal_map, t, normalization)
         else:
             theta, s, geom, normal_map, keep, cov_ag = with_normals(theta, s, labels, geom)
+            theta, s, normal_map, keep, cov_ag = _refine_jointly(
+                theta, s, labels, normal_map, data, t, normalization, ln_n
+            )
+            geom = _geometry(wi, wo, normal_map, t, normalization)
         after = float(jnp.sum(_pixel_chi2(theta, s, labels, geom, f, w)))
         n_keep = int(jnp.sum(keep))
         evidence["normals"] = {
@@ -450,6 +581,7 @@ def _fit(f, wi, wo, w, t, lobe, model, n_clusters, normals, normalization, seed,
     if normals and cov_ag is not None:
         var_a = jnp.where(keep[:, None], var_a - inv_sq + jnp.diagonal(cov_ag, axis1=1, axis2=2)[:, :c], var_a)
         slopes_var = jnp.where(keep[:, None, None], cov_ag[:, c:, c:], 0.0)
+        cov_lobe = _lobe_covariance_with_normals(a, theta, s, labels, normal_map, data, t, normalization)
     chi2 = float(jnp.sum(pix_chi2))
     valid_pixels = int(jnp.sum(jnp.any(w > 0, (1, 2))))
     n_par = valid_pixels * c + n_lobes * (1 + d) + 2 * int(jnp.sum(keep))
