@@ -73,7 +73,7 @@ def _k(name: str, fit: StateFit) -> int:
 
 def _score(name: str, state: PhotoState, cur: StateFit, ref: Callable[[], StateFit], data: PhotoData, ln_n: float):
     """The candidate ``name`` on top of ``state``: its :class:`Candidate` and fit."""
-    new = fit_state(state.plus(name), data, start=cur.shared.effects)
+    new = fit_state(state.plus(name), data, start=cur.shared)
     base = ref() if name in STRUCTURAL and cur.pixel is None else cur  # compared on the same fitter's footing
     k = _k(name, new)
     dchi2 = base.chi2 - new.chi2 if k > 0 else 0.0
@@ -203,7 +203,7 @@ def discover_photo(
             if not (c.delta_bic > 0 and c.p_value * len(remaining) < alpha):
                 break
             progress(f"step {len(steps) + 1}: hold-out check of {c.effect}")
-            hold = holdout(state, state.plus(c.effect), data, c.delta_chi2, cur.shared.effects)
+            hold = holdout(state, state.plus(c.effect), data, c.delta_chi2, cur.shared)
             c = dataclasses.replace(c, holdout=hold)
             if hold is not None and not hold.passed:
                 partial.append(c)

@@ -97,7 +97,7 @@ class PhotoData:
         import jax
 
         with jax.enable_x64(True):  # float64 for fitting, scoped (the user's setting is left alone)
-            geo = ward_geometry(self.wi, self.wo, self.normalization)
+            geo = jax.jit(ward_geometry, static_argnames="normalization")(self.wi, self.wo, self.normalization)
             return tuple(np.asarray(a, np.float64) for a in (geo.u, geo.v, geo.g))  # pyright: ignore[reportReturnType]
 
     @property
@@ -236,22 +236,27 @@ def fit_shared(
     data: PhotoData,
     names: tuple[str, ...] = (),
     keep: np.ndarray | None = None,
-    start: dict[str, tuple[float, ...]] | None = None,
+    start: SharedFit | None = None,
 ) -> SharedFit:
     """Fit the shared lobe and the radial gains ``names`` to the views ``keep (P, V)`` (default all).
 
-    ``start`` holds starting values of gains fitted before (others start at 0, no effect).
+    ``start``: a fit made before, whose α and gains start this one (other gains start at 0, no effect);
+    without it α starts from the best of a grid.
     """
     from scipy.optimize import least_squares
 
     keep = np.ones(data.radius2.shape, bool) if keep is None else keep
     geom = data.lobe_geometry
-    start = start or {}
-    theta0 = [v for n in names for v in (start.get(n) or (0.0,) * len(RADIAL[n].params))]
+    before = {} if start is None else start.effects
+    theta0 = [v for n in names for v in (before.get(n) or (0.0,) * len(RADIAL[n].params))]
     lo = [_LOG_ALPHA[0]] + [b[0] for n in names for b in RADIAL[n].bounds]
     hi = [_LOG_ALPHA[1]] + [b[1] for n in names for b in RADIAL[n].bounds]
-    costs = [float(np.sum(_residuals(np.array([t, *theta0]), data, geom, names, keep)[0] ** 2)) for t in _GRID]
-    x0 = np.clip(np.array([_GRID[int(np.argmin(costs))], *theta0]), np.add(lo, 1e-9), np.subtract(hi, 1e-9))
+    if start is None:
+        costs = [float(np.sum(_residuals(np.array([t, *theta0]), data, geom, names, keep)[0] ** 2)) for t in _GRID]
+        log_alpha = float(_GRID[int(np.argmin(costs))])
+    else:
+        log_alpha = math.log(start.alpha)
+    x0 = np.clip(np.array([log_alpha, *theta0]), np.add(lo, 1e-9), np.subtract(hi, 1e-9))
     sol = least_squares(
         lambda x: _residuals(x, data, geom, names, keep)[0].ravel(), x0, bounds=(lo, hi), x_scale=1.0, method="trf"
     )

@@ -17,7 +17,7 @@ from ..capture import FlashFile, PhotoCapture
 from ..effects._photo_model import PhotoData, photo_covariates
 from ._fit_photo import to_problems
 
-__all__ = ["diagnose_photo_capture", "photo_data"]
+__all__ = ["diagnose_photo_capture", "diagnose_photo_cli", "photo_data"]
 
 
 def photo_data(cap: PhotoCapture) -> PhotoData:
@@ -59,4 +59,15 @@ def diagnose_photo_capture(cap: PhotoCapture, *, max_steps: int = 4, progress: C
     """Discovery on a photograph capture: :func:`wardjax.effects.discover_photo` on :func:`photo_data`."""
     from ..effects import discover_photo
 
-    return discover_photo(photo_data(cap), max_steps=max_steps, progress=progress, name=cap.name)
+    progress("building the problems (blocks of pixels, their views) and the radial covariates")
+    data = photo_data(cap)
+    progress("baseline fit (the paper's model: ρd per block, one shared lobe)")
+    return discover_photo(data, max_steps=max_steps, progress=progress, name=cap.name)
+
+
+def diagnose_photo_cli(cap: PhotoCapture, out_dir, *, max_steps: int, progress: Callable[[str], object]):
+    """``wardjax diagnose`` of a photograph capture: the discovery, its report written into ``out_dir``."""
+    rep = diagnose_photo_capture(cap, max_steps=max_steps, progress=progress)
+    progress("writing report.json, report.md, gap.png and the label image")
+    rep.save(out_dir)
+    return rep
