@@ -30,6 +30,8 @@ _PALETTE = np.array(
     [[31, 119, 180], [255, 127, 14], [44, 160, 44], [214, 39, 40], [148, 103, 189], [140, 86, 75], [227, 119, 194]],
     np.uint8,
 )
+_NOTHING = "nothing needed: the gap is within the noise"
+_REMAINS = "the gap still exceeds the noise: structure remains that no library effect explains"
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -124,9 +126,9 @@ class PhotoDiscoveryReport:
         named = ", ".join(self.found)
         named += "".join(f" (or {b}: not told apart)" for _, b, _ in self.ambiguous)
         if self.within_noise:
-            return f"found {named}; the gap is within the noise" if self.found else "nothing needed: the gap is within the noise"
+            return f"found {named}; the gap is within the noise" if self.found else _NOTHING
         if self.found:
-            return f"found {named}, but the gap still exceeds the noise: structure remains that no library effect explains"
+            return f"found {named}, but {_REMAINS}"
         return "unexplained discrepancy: no library effect explains it"
 
     def label_image(self) -> np.ndarray:
@@ -195,7 +197,10 @@ class PhotoDiscoveryReport:
                 f"{ev.p_value:.2g}{held}; gap {s.gap_before:.4g} → {s.gap_after:.4g}.\n"
             )
             L.append("| candidate | k | Δχ² | ΔBIC | LR p |\n|---|---|---|---|---|")
-            L += [f"| {c.effect} | {c.k} | {c.delta_chi2:.1f} | {c.delta_bic:.1f} | {c.p_value:.2g} |" for c in s.candidates]
+            L += [
+                f"| {c.effect} | {c.k} | {c.delta_chi2:.1f} | {c.delta_bic:.1f} | {c.p_value:.2g} |"
+                for c in s.candidates
+            ]
             L.append("")
         if self.ambiguous:
             L.append("## Not told apart\n")
@@ -219,10 +224,8 @@ class PhotoDiscoveryReport:
         L.append("| label | ρs | α | blocks |\n|---|---|---|---|")
         for lb in self.lobes:
             n = lb["problems"]
-            L.append(
-                f"| {lb['label']} | {_pm(lb['rho_s'], lb.get('rho_s_sigma'))} | {_pm(lb['alpha'], lb.get('alpha_sigma'))}"
-                f" | {'all' if n is None else n} |"
-            )
+            rho_s, alpha = _pm(lb["rho_s"], lb.get("rho_s_sigma")), _pm(lb["alpha"], lb.get("alpha_sigma"))
+            L.append(f"| {lb['label']} | {rho_s} | {alpha} | {'all' if n is None else n} |")
         L.append("\n![lobe per pixel](labels.png)\n")
         L.append(
             f"_Criterion: largest ΔBIC, added if ΔBIC > 0, Bonferroni LR p < {self.settings['alpha']}, and "

@@ -601,13 +601,13 @@ def diagnose_cmd(
     _check_out_dir(out_dir)
     with Stages(progress) as stages:
         stages.advance("loading the capture and JAX")
-        from ..capture import CAPTURE_FILE, Capture, CaptureError, load_capture
+        from ..capture import CAPTURE_FILE, Capture, CaptureError, PhotoCapture, load_capture
         from ..effects import ScanlineModel, discover
         from ..effects._capture import capture_data
 
         try:
             cap = load_capture(capture)
-            if cap.method in ("flash", "multiview"):  # discovery on photographs: its own model and report
+            if isinstance(cap, PhotoCapture):  # flash, multiview: discovery on photographs: its own model and report
                 from ._diagnose_photo import diagnose_photo_cli
 
                 rep = diagnose_photo_cli(cap, out_dir, max_steps=max_steps, progress=stages.advance)
