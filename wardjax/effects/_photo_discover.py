@@ -77,6 +77,9 @@ def _score(name: str, state: PhotoState, cur: StateFit, ref: Callable[[], StateF
     base = ref() if name in STRUCTURAL and cur.pixel is None else cur  # compared on the same fitter's footing
     k = _k(name, new)
     dchi2 = base.chi2 - new.chi2 if k > 0 else 0.0
+    if name == "varying_specular" and k > 0:  # the mixture's deviance, which prices each problem's choice of lobe
+        bic = getattr(new.pixel, "evidence", {})["clusters"]["bic"]
+        dchi2 = bic[1] - bic[k // 3 + 1] + k * ln_n
     p = float(chdtrc(k, dchi2)) if k > 0 and dchi2 > 0 else 1.0
     excess = max(cur.chi2 - cur.dof, 1e-300)
     cand = Candidate(

@@ -127,11 +127,14 @@ def held_chi2(fit: StateFit, state: PhotoState, data: PhotoData, test: np.ndarra
 
     labels = np.asarray(res.labels)  # pyright: ignore[reportAttributeAccessIssue]
     n_lobes = int(np.asarray(res.rho_s).shape[0])  # pyright: ignore[reportAttributeAccessIssue]
-    moved = np.any(test, 1) & ~np.any(train, 1)  # problems the fit did not see: labelled by their costs
+    moved = np.any(test, 1) & ~np.any(train, 1)  # problems the fit did not see: the mixture's deviance
     if n_lobes > 1 and moved.any():
+        from scipy.special import logsumexp
+
         seen = np.any(train, 1)
         share = np.bincount(labels[seen], minlength=n_lobes) / max(int(seen.sum()), 1)
         costs = np.stack([_profiled(f, w, *predicted(np.full_like(labels, lb))) for lb in range(n_lobes)], 1)
-        best = np.argmin(costs - 2.0 * np.log(np.maximum(share, 1e-300))[None], 1).astype(labels.dtype)
-        labels = np.where(moved, best, labels)
+        log_pi = np.log(np.maximum(share, 1e-300))[None]
+        deviance = -2.0 * logsumexp(log_pi - 0.5 * costs, axis=1)
+        return float(np.sum(np.where(moved, deviance, costs[np.arange(labels.size), labels])))
     return float(np.sum(_profiled(f, w, *predicted(labels))))
