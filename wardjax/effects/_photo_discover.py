@@ -163,9 +163,9 @@ def discover_photo(
     Parameters
     ----------
     data
-        The capture's problems (:func:`wardjax.run.photo_data`).
+        The capture's problems (``wardjax.run._diagnose_photo.photo_data`` builds them from a loaded capture).
     candidates
-        Effects to try, from :data:`PHOTO_EFFECTS` (default all).
+        Effects to try, from ``PHOTO_EFFECTS`` (default all).
     max_steps
         At most this many effects are added.
     alpha

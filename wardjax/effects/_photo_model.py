@@ -62,7 +62,7 @@ class PhotoData:
     wi, wo
         ``(P, V, 3)`` unit directions to the lamp and to the camera, sample frame.
     radius2
-        ``(P, V)`` ``r²`` of :data:`RADIAL`'s vignetting (1 at the farthest pixel fitted).
+        ``(P, V)`` ``r²`` of the vignetting (1 at the farthest pixel fitted).
     lamp_cos
         ``(P, V)`` ``cos ψ`` of the flash falloff.
     column

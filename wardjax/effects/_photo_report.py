@@ -88,7 +88,7 @@ class PhotoDiscoveryReport:
     gap
         ``χ²/dof`` after each step, starting with the baseline (the paper's model).
     steps
-        One :class:`PhotoStep` per effect added.
+        One ``PhotoStep`` per effect added.
     partial
         Candidates with evidence that did not predict the held-out half (not named).
     ambiguous
