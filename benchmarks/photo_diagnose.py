@@ -73,7 +73,7 @@ def multiview_render(folder: Path, kind: str | None = None, *, offset: float = 1
 def diagnose(folder: Path):
     """The discovery report of the capture in ``folder``."""
     import wardjax as wj
-    from wardjax.run._diagnose_photo import diagnose_photo_capture
+    from wardjax.run import diagnose_photo_capture
 
     return diagnose_photo_capture(wj.load_capture(folder), progress=lambda _: None)
 

@@ -25,8 +25,8 @@ from click.testing import CliRunner
 import wardjax as wj
 from wardjax._files import encode_image, write_image
 from wardjax.effects import discover_photo
+from wardjax.run import photo_data
 from wardjax.run._cli import main
-from wardjax.run._diagnose_photo import photo_data
 
 RADIAL = ("vignetting", "flash_falloff")
 SIZE, F_PX, DIST, LAMP_X, NOISE = 48, 45.0, 200.0, 80.0, 0.002

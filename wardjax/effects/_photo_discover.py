@@ -163,7 +163,7 @@ def discover_photo(
     Parameters
     ----------
     data
-        The capture's problems (``wardjax.run._diagnose_photo.photo_data`` builds them from a loaded capture).
+        The capture's problems (``wardjax.run.photo_data`` builds them from a loaded capture).
     candidates
         Effects to try, from ``PHOTO_EFFECTS`` (default all).
     max_steps

@@ -55,7 +55,9 @@ def photo_data(cap: PhotoCapture) -> PhotoData:
     )
 
 
-def diagnose_photo_capture(cap: PhotoCapture, *, max_steps: int = 4, progress: Callable[[str], object] = print):
+def diagnose_photo_capture(
+    cap: PhotoCapture, *, max_steps: int = 4, progress: Callable[[str], object] = lambda _: None
+):
     """Discovery on a photograph capture: :func:`wardjax.effects.discover_photo` on :func:`photo_data`."""
     from ..effects import discover_photo
 
