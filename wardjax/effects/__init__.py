@@ -30,6 +30,10 @@ from ._report import Step as Step
 from ._report import VariogramRead as VariogramRead
 from ._report import gap_figure as gap_figure
 from ._structure import covariate_label as covariate_label
+from ._photo_discover import PHOTO_EFFECTS as PHOTO_EFFECTS
+from ._photo_discover import discover_photo as discover_photo
+from ._photo_model import PhotoData as PhotoData
+from ._photo_report import PhotoDiscoveryReport as PhotoDiscoveryReport
 
 __all__ = [
     "discover",
@@ -54,4 +58,8 @@ __all__ = [
     "VariogramRead",
     "gap_figure",
     "covariate_label",
+    "PHOTO_EFFECTS",
+    "discover_photo",
+    "PhotoData",
+    "PhotoDiscoveryReport",
 ]

@@ -27,6 +27,8 @@ if TYPE_CHECKING:  # the API as the type checker and the reader see it
     from ._fit_photo import write_photo_outputs as write_photo_outputs
     from ._smartphone import fit_smartphone_capture as fit_smartphone_capture
     from ._progress import Stages as Stages
+    from ._diagnose_photo import diagnose_photo_capture as diagnose_photo_capture
+    from ._diagnose_photo import photo_data as photo_data
 
 # Each public name → the module defining it, imported on first use (PEP 562).
 _API = {
@@ -49,6 +51,8 @@ _API = {
     "write_photo_outputs": "._fit_photo",
     "fit_smartphone_capture": "._smartphone",
     "Stages": "._progress",
+    "diagnose_photo_capture": "._diagnose_photo",
+    "photo_data": "._diagnose_photo",
 }
 __all__ = [
     "BatchItem",
@@ -70,6 +74,8 @@ __all__ = [
     "write_photo_outputs",
     "fit_smartphone_capture",
     "Stages",
+    "diagnose_photo_capture",
+    "photo_data",
 ]
 
 

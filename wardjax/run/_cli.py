@@ -605,22 +605,29 @@ def diagnose_cmd(
         _fail(str(exc))
     with Stages(progress) as stages:
         stages.advance("loading the capture and JAX")
-        from ..capture import CAPTURE_FILE, Capture, CaptureError, load_capture
+        from ..capture import CAPTURE_FILE, Capture, CaptureError, PhotoCapture, load_capture
         from ..effects import ScanlineModel, discover
         from ..effects._capture import capture_data
 
         try:
             cap = load_capture(capture)
-            if not isinstance(cap, Capture):
-                raise CaptureError(CAPTURE_FILE, "method", f"diagnose reads method = 'scanline', got {cap.method!r}")
-            n = _DIAGNOSE_SAMPLES[texture] if max_samples is None else max_samples
-            stages.advance(f"reconstructing the probe's BRDF values (binned to ≤ {n:,} pixels per channel)")
-            data = capture_data(cap, max_samples=n)
-            model = ScanlineModel(cap.config.fit.normalization)
-            stages.advance("baseline fit (the model alone)")
-            rep = discover(model, data, max_steps=max_steps, texture=texture, progress=stages.advance)
-            stages.advance("writing report.json, report.md and the plots")
-            rep.save(out_dir, extra={"capture": cap.name})
+            if isinstance(cap, PhotoCapture):  # flash, multiview: discovery on photographs: its own model and report
+                from ._diagnose_photo import diagnose_photo_cli
+
+                rep = diagnose_photo_cli(cap, out_dir, max_steps=max_steps, progress=stages.advance)
+            elif not isinstance(cap, Capture):
+                raise CaptureError(
+                    CAPTURE_FILE, "method", f"diagnose reads 'scanline', 'flash' or 'multiview', got {cap.method!r}"
+                )
+            else:
+                n = _DIAGNOSE_SAMPLES[texture] if max_samples is None else max_samples
+                stages.advance(f"reconstructing the probe's BRDF values (binned to ≤ {n:,} pixels per channel)")
+                data = capture_data(cap, max_samples=n)
+                model = ScanlineModel(cap.config.fit.normalization)
+                stages.advance("baseline fit (the model alone)")
+                rep = discover(model, data, max_steps=max_steps, texture=texture, progress=stages.advance)
+                stages.advance("writing report.json, report.md and the plots")
+                rep.save(out_dir, extra={"capture": cap.name})
         except (CaptureError, ValueError, OSError) as exc:
             stages.fail()  # the failed stage's line first, then the error
             _fail(str(exc).splitlines()[0])
