@@ -79,6 +79,13 @@ def main(argv=None) -> dict:
     )
     print(f"null data: an effect added in {100 * s['null_false_rate']:.1f} % of {s['n_null']} draws")
     print(f"largest gap after discovery (correctly named): {s['gap_after_max_detectable']:.3f}")
+    band = s["gap_band"]
+    print(
+        f"gap after the true effect within 1 ± 2√(2/dof): {band['within']} of {band['n']} "
+        f"({band['below']} below, {band['above']} above)"
+    )
+    zsd = s["z_robust_sd"]
+    print(f"z after discovery (model-averaged σ), robust SD: ρs {zsd['rho_s']:.2f}, α {zsd['alpha']:.2f}")
     if ool:
         print(
             f"out-of-library ({eb.OUT_OF_LIBRARY}): unexplained reported in "

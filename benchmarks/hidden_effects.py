@@ -312,6 +312,8 @@ def run_bench(
                 "n_obs": rep.n_obs,
                 "unexplained": bool(rep.unexplained),
                 "partial": list(rep.partial),
+                "dof": rep.final.dof,
+                **_z_fields(rep, case.truth),
                 "seconds": time.perf_counter() - t0,
             }
         )
@@ -320,8 +322,29 @@ def run_bench(
     return summarise(rows)
 
 
+def _z_fields(rep, truth: dict) -> dict:
+    """ρs and α after discovery (model-averaged, :attr:`~wardjax.effects.DiscoveryReport.averaged`), their σ and
+    ``z = (value − truth)/σ``; α's truth is ``√(αx αy)``, the scene's α."""
+    av = rep.averaged
+    out = {}
+    for k in ("rho_s", "alpha"):
+        v, sd = float(av[k]["value"]), float(av[k]["sigma"])
+        out |= {k: v, f"{k}_sigma": sd, f"z_{k}": (v - float(truth[k])) / sd if sd > 0 else math.nan}
+    return out
+
+
+def _robust_sd(z) -> float:
+    """1.4826 × the median absolute deviation of the finite ``z``: a normal sample's SD, robust to outliers."""
+    z = np.asarray([v for v in z if math.isfinite(v)], float)
+    return float(1.4826 * np.median(np.abs(z - np.median(z)))) if z.size else math.nan
+
+
 def summarise(rows: list[dict]) -> dict:
-    """Confusion matrix, rates and gaps from bench rows."""
+    """Confusion matrix, rates and gaps from bench rows.
+
+    Also ``z_robust_sd`` (ρs and α after discovery against the truth, over every row) and ``gap_band``: of the
+    detectable draws named first, how many end with the gap in ``1 ± 2 √(2/dof)`` and how many below it.
+    """
     conf: dict[str, dict[str, int]] = {}
     for r in rows:
         conf.setdefault(r["hidden"], {}).setdefault(r["first"], 0)
@@ -341,7 +364,20 @@ def summarise(rows: list[dict]) -> dict:
         "null_false_rate": (sum(1 for r in nulls if r["found"]) / len(nulls)) if nulls else math.nan,
         "n_null": len(nulls),
         "gap_after_max_detectable": max((r["gap_after"] for r in det if r["first"] == r["hidden"]), default=math.nan),
+        "z_robust_sd": {k: _robust_sd(r[f"z_{k}"] for r in rows if f"z_{k}" in r) for k in ("rho_s", "alpha")},
+        "gap_band": _gap_band([r for r in det if r["first"] == r["hidden"] and "dof" in r]),
         "rows": rows,
+    }
+
+
+def _gap_band(rows: list[dict]) -> dict:
+    """How many ``rows`` end with the gap within ``1 ± 2 √(2/dof)``, below it, and above it."""
+    half = [2.0 * math.sqrt(2.0 / r["dof"]) for r in rows]
+    return {
+        "n": len(rows),
+        "within": sum(abs(r["gap_after"] - 1.0) <= h for r, h in zip(rows, half)),
+        "below": sum(r["gap_after"] < 1.0 - h for r, h in zip(rows, half)),
+        "above": sum(r["gap_after"] > 1.0 + h for r, h in zip(rows, half)),
     }
 
 

@@ -86,14 +86,13 @@ __all__ = ["discover"]
 _PLOT_MAX = 20_000
 _SOLO_MIN_OBS = 20_000  # from this many residuals on, each fit is solved alone (_fit_batch)
 # An unconverged fit that matters gets up to this many more rounds of lm_steps (_Search.refine): with the
-# default cap of 20 steps, 240 steps in all, as 60 + 3 rounds gave before the cap was lowered.
+# default cap of 20 steps, 240 steps in all.
 _REFINE_ROUNDS = 11
 _AMBIGUOUS_BIC = 6.0  # a confusable runner-up within this ΔBIC of the winner is named too (Kass & Raftery: < 6)
 # effects whose signatures one capture may not tell apart: a lamp field follows image position, anisotropy the
 # half-vector azimuth, the Fresnel rise the incidence angle, and across one capture's scanlines they covary (on
 # textured captures the Fresnel rise, one parameter, took the ramp across the image); a camera response compresses
-# the highlight against each channel's diffuse floor, which a per-channel specular scale mimics (textured bench,
-# noise texture, codes^1.12: their ΔBIC 3.1 and 3.4 apart, the wrong one ahead)
+# the highlight against each channel's diffuse floor, which a per-channel specular scale mimics
 _CONFUSABLE = {
     "illumination_gradient": ("anisotropy", "fresnel"),
     "anisotropy": ("illumination_gradient",),
@@ -177,7 +176,7 @@ class _Search:
         first) can take Levenberg–Marquardt more than ``lm_steps`` steps; a
         fit whose parameters are reported, or whose Δχ² decides, must have
         converged. The priors stay centred on the first start. A round that leaves χ² where it was ends
-        it (stalled; it stays unconverged): a 320 × 240 capture's winner once sat still 11 rounds, 8 of 16 s.
+        it (stalled; it stays unconverged) rather than repeat the same point.
         """
         last = math.inf
         for _ in range(_REFINE_ROUNDS):

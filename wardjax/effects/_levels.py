@@ -1,6 +1,6 @@
 """The texture between scanlines, in the scanlines' diffuse levels: their relative ρd as a Gaussian process.
 
-Why (measured, see docs/missing-effects.md)
+Why
     The scanline model profiles ρd per scanline and channel, so anything that
     scales a whole scanline (an image column) is absorbed: an illumination
     ramp across the image, ``1 + g s``, survives only on the specular lobe,

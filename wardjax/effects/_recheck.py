@@ -7,20 +7,19 @@ Why a second covariance
     effect only dents. On a textured capture the gap left is read under the
     texture's covariance measured from products about each scanline's mean
     (:func:`~wardjax.effects._texture.lag_covariances`), whose bias bends the
-    long lags on textures smooth along the scanline; untouched captures of
-    10 % wood then read gaps up to 1.050, and a correct winner on top of them
-    looked like a dent in something bigger. The covariance from the
-    cross-variogram has no such bias (untouched: 0.987 ± 0.020 against
-    0.979 ± 0.026) but, used for every fit, lost more library draws than it
-    gained (docs/missing-effects.md). So it is read only here: the current
-    model and the winner are refitted under it, from where they stand, and
-    the guard holds only if it holds under both covariances.
+    long lags on textures smooth along the scanline: there a clean capture's
+    gap can sit a few SD above 1, and a correct winner on top of it looks
+    like a dent in something bigger. The covariance from the cross-variogram
+    has no such bias but, as the covariance of every fit, costs power on
+    library effects. So it is read only here: the current model and the
+    winner are refitted under it, from where they stand, and the guard holds
+    only if it holds under both covariances.
 
-    A pure relaxation: nothing the guard let through is refused, the evidence
-    (ΔBIC, LR) is untouched, and nothing is computed unless the guard is
-    about to refuse. On the textured bench's 47 refusals (seeds 0–2, 8 bits):
-    six of the 13 library winners were let through (gaps left 1.006–1.023
-    under the variogram), none of the 28 blurred frames (gaps left ≥ 1.12).
+    A pure relaxation: nothing the guard lets through is refused, the
+    evidence (ΔBIC, LR) is untouched, and nothing is computed unless the
+    guard is about to refuse. A library winner on a smooth texture typically
+    leaves a gap within about 1.02 under the variogram; an out-of-library
+    effect such as a blurred frame leaves one well above it.
 """
 
 from __future__ import annotations

@@ -7,8 +7,9 @@ Why
     relative error ``f · ε``, ``ε`` the smoothed noise, correlated over a few
     pixels along the scanline. Second differences (the capture's white-noise
     estimate, :mod:`wardjax.effects._capture`) cancel a component that
-    smooth, so it went unseen: binned 2 × 2 from a 320 × 240 capture the
-    noise was underestimated by 8–10 % in variance (``tests/test_effects.py``).
+    smooth, so without this term the noise of a 320 × 240 capture binned
+    2 × 2 is underestimated by about a tenth in variance
+    (``tests/test_effects.py``).
 
 The estimate
     The standard is uniform and Lambertian, so its pixels hold nothing but

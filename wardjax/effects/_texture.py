@@ -1,11 +1,10 @@
 """ρd texture in the scanline model: a Gaussian-process term with the texture's measured autocovariance.
 
-Why this form (measured, see docs/missing-effects.md)
+Why this form
     A textured probe's diffuse albedo varies from pixel to pixel, ``ρd(p) =
     ρ̄d (1 + t(p))``. With one ρd per scanline the texture is left in the
-    residuals, where it swamps every effect (the gap of an untouched 320 × 240
-    wood capture read 2.7 and no edit of its images was named). Two other
-    ways were considered:
+    residuals, where it swamps every effect (an untouched 320 × 240 wood
+    capture reads a gap near 2.7). Two other forms do not work:
 
     - ρd per image position with a smoothness prior: per pixel the diffuse
       term is free, so everything the smoothness allows — a gradient across
@@ -24,13 +23,13 @@ Why this form (measured, see docs/missing-effects.md)
 
     ``X`` is measured, not a parametric form (:func:`joint_autocovariance`):
     the products of the baseline's residuals off the highlight at every lag
-    along the scanline and between every pair of channels. Two things the
-    first form, ``T_c ρ^{|i−j|}`` per channel (below), got wrong on the
-    textured bench: wood grain is smooth along a scanline, and an
-    exponential (a rough process) explained a highlight-sized bump as
-    texture at small cost (the ramp on wood was missed); and the texture is
-    one pattern in all three channels, so per-channel whitening counted the
-    same texture three times as independent evidence. What one scanline's
+    along the scanline and between every pair of channels. An exponential
+    per channel, ``T_c ρ^{|i−j|}`` (below), gets two things wrong: wood
+    grain is smooth along a scanline, and an exponential (a rough process)
+    explains a highlight-sized bump as texture at small cost (a ramp across
+    the image goes unseen); and the texture is one pattern in all three
+    channels, so per-channel whitening counts the same texture three times
+    as independent evidence. What one scanline's
     process cannot hold — the texture shared by neighbouring scanlines
     (image columns: marble's veins run across several) — enters each
     candidate's evidence as a design effect (:func:`design_effect`), which
@@ -38,8 +37,8 @@ Why this form (measured, see docs/missing-effects.md)
 
 Estimating ``T`` and ``ρ`` from one capture (the significance test)
     :func:`~wardjax.effects._texture_term.with_texture` uses this estimate
-    only to decide whether there is a texture to carry: its white noise read
-    0 on every bench texture (the exponential takes the whole drop from lag
+    only to decide whether there is a texture to carry: its white noise tends
+    to 0 on smooth textures (the exponential takes the whole drop from lag
     0 to lag 1). The noise the model carries is read between channels
     (:func:`~wardjax.effects._texture_term.white_noise_share`) and its shape
     by :func:`level_noise`.
@@ -61,18 +60,17 @@ Estimating ``T`` and ``ρ`` from one capture (the significance test)
     correlated texture, which the lag-1 estimate there counted as noise.
 
     Short lags alone identify only ``T (1 − ρ)`` when the texture is
-    correlated over most of a scanline (the simulated wood): the estimate then
-    ran to ``ρ = 0.995`` with ``T`` ~36× the variance the residuals actually
-    have, and the GP absorbed a smooth effect shared by all scanlines. So one
-    more row per value pins ``T``: the squared deviation from its scanline's
+    correlated over most of a scanline (the simulated wood): alone they let
+    ``ρ`` run to the grid's end with ``T`` far above the variance the
+    residuals have, and the GP would absorb a smooth effect shared by all
+    scanlines. So one more row per value pins ``T``: the squared deviation from its scanline's
     mean (the per-scanline ρd takes that mean out; off the highlight, as the
     long lags), with::
 
         E[(e_i − ē)²] = σ²(f_i) (1 − 1/n) + T (1 − 2/n Σ_j ρ^{|i−j|} + 1/n² Σ_jk ρ^{|j−k|})
 
     (the variance the texture leaves about the mean of an ``n``-value
-    scanline), measured in ``benchmarks/texture_across_scanlines.py`` and
-    docs/missing-effects.md.
+    scanline; ``benchmarks/texture_across_scanlines.py`` checks it).
 """
 
 from __future__ import annotations
@@ -314,12 +312,11 @@ def lag_covariances(e: np.ndarray, off: np.ndarray, variogram: bool = False) -> 
     c(j − k)`` for ``n`` values, that is one constant (absorbed by ρd per
     scanline) only where the values are contiguous; off the highlight they
     are two runs, one on each side of it, and on a texture smooth along the
-    scanline the bias then bends the long lags. Measured on the textured
-    bench's 36 untouched captures (docs/missing-effects.md): gaps
-    0.979 ± 0.026 about the mean, 0.987 ± 0.020 from the variogram with a
-    window of a quarter scanline; as the covariance of every fit it lost
-    more library draws than it gained, so ``discover`` reads it only as the
-    guard's second opinion (:mod:`wardjax.effects._recheck`).
+    scanline the bias then bends the long lags. The variogram's covariance
+    reads clean textured captures closer to a gap of 1, but as the
+    covariance of every fit it costs power on library effects, so
+    ``discover`` reads it only as the guard's second opinion
+    (:mod:`wardjax.effects._recheck`).
     """
     s_n, n, c_n = e.shape
     half = max(n // 2, 2)
@@ -420,9 +417,9 @@ def cross_covariance(e: np.ndarray, off: np.ndarray, lags: tuple[int, int] | Non
     (:func:`joint_autocovariance`). The sample range matters: a candidate's
     whitened direction is orthogonal to each scanline's constants (ρd is
     profiled), so its products with the covariance largely cancel when
-    summed over a scanline's lags, and cut off at 8 samples they did not —
-    marble 10 %'s camera response read a design effect of 8.8 (Δχ² 81 → 9.3,
-    not named); over 40 samples 2.9, over half a scanline (49) 1.4.
+    summed over a scanline's lags, but cut off after a few samples they do
+    not, and a present effect (a camera response on a veined marble) reads
+    a design effect several times too large.
     """
     n = e.shape[1]
     K, M = (_CROSS_SCANLINES, max(n // 2, 2)) if lags is None else lags
@@ -435,9 +432,8 @@ def _lag_sums(a: np.ndarray, b: np.ndarray, K: int, M: int) -> np.ndarray:
     """``Σ_{s,i} a[s, i] b[s + k, i + m]`` over the overlap, for ``|k| ≤ K``, ``|m| ≤ M``: ``(2K + 1, 2M + 1)``.
 
     One FFT cross-correlation of the ``(S, N)`` arrays instead of a sum per
-    lag: the same numbers to ~10⁻¹⁵ of their scale, and
-    the ~14,000 lags of three channels' cross-covariance in 10 ms instead of
-    0.4 s — it is measured once per candidate whose evidence is deflated.
+    lag (the same numbers to rounding, tens of times faster): it is measured
+    once per candidate whose evidence is deflated.
     """
     s_n, n = a.shape
     full = fftconvolve(b, a[::-1, ::-1], mode="full")  # entry (k + S − 1, m + N − 1)

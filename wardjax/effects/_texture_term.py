@@ -29,8 +29,7 @@ from ._texture import (
 __all__ = ["CrossTexture", "identity_whitened", "white_noise_share", "with_texture"]
 
 _NOISE_FLOOR = 0.02  # white noise off the highlight at least this fraction of the texture variance
-# the variogram's Hann window, a fraction of half a scanline: 0.35, 0.5 and 0.7 read the 36 untouched captures of
-# the textured bench at gaps 0.987 ± 0.021, 0.987 ± 0.020 and 0.989 ± 0.025 (docs/missing-effects.md)
+# the variogram's Hann window, a fraction of half a scanline (0.35–0.7 read clean captures alike)
 _VARIOGRAM_WINDOW = 0.5
 
 
@@ -152,17 +151,14 @@ def white_noise_share(lags: np.ndarray) -> np.ndarray:
     hue that varies with the pattern is fine). One channel: the lag-0 value
     less the straight line through lags 1 and 2.
 
-    Measured on 160 × 120 captures ``wardjax simulate`` wrote, against the
-    noise of the same capture without texture (5.7, 5.2, 4.4 · 10⁻⁶): noise,
-    wood and marble at 4 % and 10 % read within 10 % of it. The lag
-    regression of :func:`~wardjax.effects._texture.estimate_texture` read 0
-    on all of them (its exponential took the whole drop from lag 0 to 1),
-    and calibrating the noise so that the whitened residuals off the
-    highlight had unit mean square could not tell noise from texture either
-    (a lag-0 share moves the whitened sum only through the positive
-    semi-definite clip): the noise then sat in the stationary texture term
-    while it grows by 2.6× along a scanline with the lamp's distance, and the
-    whitened residuals ran from 0.55 to 1.4 along every scanline.
+    On simulated captures it reads the sensor's noise within about 10 %
+    (``tests/test_texture_covariance.py``). The lag regression of
+    :func:`~wardjax.effects._texture.estimate_texture` cannot (its
+    exponential takes the whole drop from lag 0 to 1), and neither can a
+    calibration of the whitened residuals' mean square off the highlight (a
+    lag-0 share moves the whitened sum only through the positive
+    semi-definite clip): the noise would then sit in the stationary texture
+    term, while it grows along a scanline with the lamp's distance.
     """
     c_n, half = lags.shape[0], (lags.shape[2] - 1) // 2
     out = np.zeros(c_n)
