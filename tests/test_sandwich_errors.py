@@ -57,7 +57,9 @@ def test_sandwich_matches_a_numpy_reference():
         jac[:, :, 4] = (rs * b * (2 * t / a**3 - 2 / a))[:, None]
         jac = jac.reshape(-1, 5)
         bread = np.linalg.inv(jac.T @ jac)
-        meat = (jac * r.reshape(-1, 1) ** 2).T @ jac
+        lev = np.einsum("ip,pq,iq->i", jac, bread, jac)  # the hat matrix's diagonal
+        assert abs(lev.sum() - 5) < 1e-6  # its trace is the number of parameters
+        meat = (jac * (r.reshape(-1) / (1 - lev))[:, None] ** 2).T @ jac  # HC3
         ref = bread @ meat @ bread
         np.testing.assert_allclose(res.covariance[i], ref, rtol=1e-6, atol=1e-14)
         # and Gauss–Newton's is the same bread times the mean squared residual

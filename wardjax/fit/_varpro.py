@@ -63,6 +63,8 @@ MAX_REL_SIGMA = 1.0
 # The Gauss–Newton covariance is trusted where the profiled χ² one standard error
 # from the optimum rises by 1 ± CURVATURE_TOL residual variances, as a quadratic would.
 CURVATURE_TOL = 0.2
+# The sandwich's leverage correction divides by 1 − h; a value with h → 1 has a residual → 0.
+LEVERAGE_FLOOR = 1e-6
 
 
 class Stats(NamedTuple):
@@ -506,14 +508,18 @@ def curvature_check(theta, chi2, s_hat, p: Prepared, cov, scale):
 
 
 def sandwich_covariance(theta, rho_s, cov, scale, f, u, v, g, w, mean=None):
-    """Heteroscedasticity-consistent (sandwich, HC0) covariance of ``(ρd RGB, ρs, α…)``.
+    """Heteroscedasticity-consistent (sandwich, HC3) covariance of ``(ρd RGB, ρs, α…)``.
 
-    ``Σ_HC = B⁻¹ (Σ_i w_i² r_i² J_iᵀ J_i) B⁻¹`` (White 1980) with ``B⁻¹ = cov / (χ²/dof)``
-    the unscaled Gauss–Newton covariance, ``r_i`` the residual and ``J_i`` the gradient of
-    the model at observation ``i`` (``∂/∂ρd_c = δ/π``, ``∂/∂ρs = b``,
-    ``∂/∂α_k = ρs b ∂log b/∂log α_k / α_k``). It needs no noise model: it holds when the
+    ``Σ_HC = B⁻¹ (Σ_i w_i² r_i² / (1 − h_i)² · J_iᵀ J_i) B⁻¹`` (White 1980; the leverage
+    correction HC3 of MacKinnon & White 1985) with ``B⁻¹ = cov / (χ²/dof)`` the unscaled
+    Gauss–Newton covariance, ``r_i`` the residual, ``J_i`` the gradient of the model at
+    observation ``i`` (``∂/∂ρd_c = δ/π``, ``∂/∂ρs = b``, ``∂/∂α_k = ρs b ∂log b/∂log α_k / α_k``)
+    and ``h_i = w_i J_i B⁻¹ J_iᵀ`` its leverage. It needs no noise model: it holds when the
     residual variance changes along the scanline (photon noise grows with the signal),
-    where ``B⁻¹ χ²/dof`` assumes one variance for all samples. One pass over the samples
+    where ``B⁻¹ χ²/dof`` assumes one variance for all samples. The leverage correction
+    matters where there are few observations per parameter (a pixel in 9 photographs:
+    27 values for 5 parameters, where the plain sandwich, HC0, is 20–30 % too small);
+    over a scanline of 256 samples it changes σ by well under 1 %. One pass over the samples
     at the optimum ``θ`` (log α, or log αx, log αy) and ``ρs``: ``f`` (3, N), ``u, v, g``
     (N,), ``w`` (C, N) as the kernel's geometry stage leaves them (sample axis last,
     weight 0 where a value is unusable). ``mean`` (3,), optional: the weighted mean of
@@ -547,7 +553,12 @@ def sandwich_covariance(theta, rho_s, cov, scale, f, u, v, g, w, mean=None):
     # J per observation: one-hot ρd_c / π, then b, then ρs b ∂log b/∂log α_k / α_k.
     jl = jnp.concatenate([b[None, :], spec[None, :] * dlog / alpha[:, None]], axis=0)  # (1+k, N)
     bread = cov / jnp.where(scale > 0, scale, 1.0)
-    r2 = (ww * resid) ** 2  # (3, N)
+    # Leverage h = w J B⁻¹ Jᵀ per observation, from the ρd (one-hot/π) and lobe (jl) parts of J.
+    cross = jnp.sum(bread[:3, 3:, None] * jl[None, :, :], axis=1)  # (3, N)
+    quad = jnp.sum(jl * jnp.sum(bread[3:, 3:, None] * jl[None, :, :], axis=1), axis=0)  # (N,)
+    lev = ww * (jnp.diagonal(bread)[:3, None] / jnp.pi**2 + (2.0 / jnp.pi) * cross + quad[None, :])
+    # A value with leverage 1 has residual 0: the floor only keeps 0/0 away.
+    r2 = (ww * resid / jnp.maximum(1.0 - lev, LEVERAGE_FLOOR)) ** 2  # (3, N)
     r2tot = jnp.sum(r2, axis=0)
     pairs = [(i, j) for i in range(1 + k) for j in range(i, 1 + k)]
     prods = jnp.concatenate(
