@@ -22,8 +22,8 @@ Uncertainties with weights are ``√diag((JᵀWJ)⁻¹ · χ²/dof)``: the Gauss
 covariance at the solution scaled by the residual variance (with ``weights = 1/σ²``
 from a correct noise model χ²/dof ≈ 1 and the scaling is harmless). Without
 weights the noise may grow with the signal, and the default reports the sandwich
-covariance ``(JᵀJ)⁻¹ (Σ r²/(1−h)² JᵢᵀJᵢ) (JᵀJ)⁻¹`` instead (White 1980, with MacKinnon &
-White's 1985 leverage correction HC3, ``h`` the leverage of each value). Where χ² is not
+covariance ``(JᵀJ)⁻¹ (Σ r² JᵢᵀJᵢ) (JᵀJ)⁻¹`` instead (White 1980; with few samples per fit,
+MacKinnon & White's 1985 leverage correction HC3, ``r²/(1−h)²``). Where χ² is not
 quadratic over one standard error, profile-likelihood errors replace either.
 
 Fits run in float64 inside a scoped ``jax.enable_x64(True)``: importing or
