@@ -562,7 +562,7 @@ def sandwich_covariance(theta, rho_s, cov, scale, f, u, v, g, w, mean=None):
         # Leverage h = w J B⁻¹ Jᵀ per observation, from the ρd (one-hot/π) and lobe (jl) parts of J.
         cross = sum(bread[:3, 3 + i, None] * jl[i][None, :] for i in range(1 + k))  # (3, N)
         quad = sum(bread[3 + i, 3 + j] * jl[i] * jl[j] for i in range(1 + k) for j in range(1 + k))  # (N,)
-        lev = ww * (jnp.diagonal(bread)[:3, None] / jnp.pi**2 + (2.0 / jnp.pi) * cross + quad[None, :])
+        lev = ww * (jnp.diagonal(bread)[:3, None] / jnp.pi**2 + (2.0 / jnp.pi) * cross + jnp.asarray(quad)[None, :])
         # A value with leverage 1 has residual 0: the floor only keeps 0/0 away.
         r2 = r2 / jnp.maximum(1.0 - lev, LEVERAGE_FLOOR) ** 2
     r2tot = jnp.sum(r2, axis=0)
