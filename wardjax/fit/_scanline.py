@@ -347,14 +347,15 @@ def _default_chunk(dtype, devices) -> int:
     return _ACCELERATOR_CHUNK if limit >= 32 << 30 else _ACCELERATOR_CHUNK // 4
 
 
-def _placement(devices):
+def _placement(devices, direct: bool = True):
     """How a chunk's rows are put on the devices: split along the scanline axis over a 1-D mesh.
 
     Returns a function of one array. On the default device alone it returns NumPy arrays as they
     are: the compiled call copies them itself, where ``device_put`` with a sharding costs about
-    3 ms of host time per array (the whole cost of a chunk of small problems).
+    3 ms of host time per array (the whole cost of a chunk of small problems). ``direct=False``:
+    always ``device_put`` (the profiles' few chunks, whose host-side inputs then stay visible).
     """
-    if len(devices) == 1 and devices[0] == jax.devices()[0]:
+    if direct and len(devices) == 1 and devices[0] == jax.devices()[0]:
         return lambda a: a
     mesh = jax.sharding.Mesh(np.asarray(devices), ("scanline",))
     sharding = jax.sharding.NamedSharding(mesh, jax.sharding.PartitionSpec("scanline"))
@@ -424,7 +425,7 @@ def _profile_where_nonlinear(sol: _varpro.ScanlineSolution, data, *, normalizati
     split over ``devices`` along the scanline axis as :func:`_solve` splits the fits.
     """
     devices = _check_devices(devices)
-    put = _placement(devices)
+    put = _placement(devices, direct=False)
     rows = np.flatnonzero(sol.nonlinear.astype(bool) & (sol.status == Status.CONVERGED))
     if not rows.size:
         return
