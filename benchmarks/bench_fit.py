@@ -55,12 +55,14 @@ def _unit(a):
     return a / np.linalg.norm(a, axis=-1, keepdims=True)
 
 
-def draw_scanlines(s: int, alpha_range, *, n: int = 256, noise: float = NOISE, seed: int = 0) -> Drawn:
+def draw_scanlines(
+    s: int, alpha_range, *, n: int = 256, noise: float = NOISE, seed: int = 0, span=(3.0, 40.0)
+) -> Drawn:
     """``s`` scanlines of random Ward materials, each in its own rig, by plain NumPy.
 
     Lamp at elevation 20–60° on the +y side and camera at 20–60° on the −y side, both at
     x = 0 and 400–900 mm from the sample's origin; the scanline runs along y over
-    ``±(3…40)·α`` in half-vector slope (log-uniform) around the highlight, at an offset
+    ``±span·α`` (default 3…40, log-uniform) in half-vector slope around the highlight, at an offset
     across it that tilts the half vector by up to ``±1.5 α``. Values are Ward 1992,
     ``ρd/π + ρs exp(−tan²δ/α²) / (4πα² √(cos θi cos θo))``, times ``1 + noise·ε``.
     """
@@ -85,7 +87,7 @@ def draw_scanlines(s: int, alpha_range, *, n: int = 256, noise: float = NOISE, s
     zero = np.zeros(s)
     dy = (slopes(zero, y_m + step)[1] - slopes(zero, y_m - step)[1]) / (2 * step)
     dx = (slopes(zero + step, y_m)[0] - slopes(zero - step, y_m)[0]) / (2 * step)
-    half = np.exp(rng.uniform(np.log(3.0), np.log(40.0), s)) * alpha / np.abs(dy)
+    half = np.exp(rng.uniform(np.log(span[0]), np.log(span[1]), s)) * alpha / np.abs(dy)
     x0 = rng.uniform(-1.5, 1.5, s) * alpha / np.abs(dx)
     y = y_m[:, None] + np.linspace(-1.0, 1.0, n)[None, :] * half[:, None]
     p = np.stack([np.broadcast_to(x0[:, None], y.shape), y, np.zeros_like(y)], -1)

@@ -37,8 +37,10 @@ def test_unweighted_errors_are_honest_under_signal_dependent_noise(alpha_range, 
         assert min(_z(gn, d)) > 1.5  # one variance for all samples: overconfident on narrow lobes
 
 
-def test_sandwich_matches_a_numpy_reference():
-    d = draw_scanlines(8, (0.03, 0.1), seed=5)
+@pytest.mark.parametrize("n", [256, 9])
+def test_sandwich_matches_a_numpy_reference(n):
+    """HC0 over 256 samples; HC3 (residuals divided by 1 − leverage) over 9."""
+    d = draw_scanlines(8, (0.03, 0.1), seed=5, n=n, span=(3.0, 40.0) if n > 64 else (1.5, 4.0))
     res = wj.fit_scanlines(d.f_r, d.wi, d.wo, errors="auto")
     gn = wj.fit_scanlines(d.f_r, d.wi, d.wo, errors="gauss_newton")
     rows = np.flatnonzero(res.errors == "sandwich")[:4]
@@ -57,9 +59,35 @@ def test_sandwich_matches_a_numpy_reference():
         jac[:, :, 4] = (rs * b * (2 * t / a**3 - 2 / a))[:, None]
         jac = jac.reshape(-1, 5)
         bread = np.linalg.inv(jac.T @ jac)
-        meat = (jac * r.reshape(-1, 1) ** 2).T @ jac
+        lev = np.einsum("ip,pq,iq->i", jac, bread, jac)  # the hat matrix's diagonal
+        assert abs(lev.sum() - 5) < 1e-6  # its trace is the number of parameters
+        lev = lev if n <= 64 else np.zeros_like(lev)
+        meat = (jac * (r.reshape(-1) / (1 - lev))[:, None] ** 2).T @ jac  # HC3 (HC0 without leverage)
         ref = bread @ meat @ bread
         np.testing.assert_allclose(res.covariance[i], ref, rtol=1e-6, atol=1e-14)
         # and Gauss–Newton's is the same bread times the mean squared residual
         dof = r.size - 5
         np.testing.assert_allclose(gn.covariance[i], bread * np.sum(r**2) / dof, rtol=1e-6, atol=1e-14)
+
+
+@pytest.mark.slow
+def test_few_samples_per_fit_errors_are_honest():
+    """9 samples per fit (a pixel in 9 photographs), no weights: the HC3 sandwich keeps z-SD within 0.85–1.15."""
+    d = draw_scanlines(3000, (0.03, 0.3), n=9, span=(1.5, 4.0), seed=2)
+    res = wj.fit_scanlines(d.f_r, d.wi, d.wo)
+    assert res.ok.mean() > 0.95
+    sd_a, sd_s = _z(res, d)
+    assert 0.85 <= sd_a <= 1.15 and 0.85 <= sd_s <= 1.15, (sd_a, sd_s)
+
+
+@pytest.mark.slow  # two sample counts, two compiled programs
+def test_small_problems_do_not_depend_on_padding():
+    """Fits of 9 samples (compiled for 9) equal those of the same samples padded with unusable ones to 12."""
+    d = draw_scanlines(40, (0.03, 0.3), n=9, span=(1.5, 4.0), seed=6)
+    res = wj.fit_scanlines(d.f_r, d.wi, d.wo)
+    pad = lambda a, v: np.concatenate([a, np.full(a.shape[:1] + (3, 3), v)], axis=1)
+    padded = wj.fit_scanlines(pad(d.f_r, np.nan), pad(d.wi, np.nan), pad(d.wo, np.nan))
+    assert res.ok.mean() > 0.9
+    np.testing.assert_array_equal(res.status, padded.status)
+    np.testing.assert_allclose(padded.params.alpha_x, res.params.alpha_x, rtol=1e-9)
+    np.testing.assert_allclose(padded.covariance, res.covariance, rtol=1e-6, atol=1e-14)

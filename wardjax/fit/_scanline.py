@@ -22,7 +22,8 @@ Uncertainties with weights are ``√diag((JᵀWJ)⁻¹ · χ²/dof)``: the Gauss
 covariance at the solution scaled by the residual variance (with ``weights = 1/σ²``
 from a correct noise model χ²/dof ≈ 1 and the scaling is harmless). Without
 weights the noise may grow with the signal, and the default reports the sandwich
-covariance ``(JᵀJ)⁻¹ (Σ r² JᵢᵀJᵢ) (JᵀJ)⁻¹`` instead (White 1980). Where χ² is not
+covariance ``(JᵀJ)⁻¹ (Σ r² JᵢᵀJᵢ) (JᵀJ)⁻¹`` instead (White 1980; with few samples per fit,
+MacKinnon & White's 1985 leverage correction HC3, ``r²/(1−h)²``). Where χ² is not
 quadratic over one standard error, profile-likelihood errors replace either.
 
 Fits run in float64 inside a scoped ``jax.enable_x64(True)``: importing or
@@ -64,6 +65,8 @@ Model = Literal["isotropic", "anisotropic"]
 # fits per CPU-second).
 _CHUNK = {np.dtype(np.float64): 1024, np.dtype(np.float32): 1024}
 _ACCELERATOR_CHUNK = 131_072  # per device, on a GPU with ≥ 32 GB (see _default_chunk)
+# Small problems (a pixel seen in a few photographs): compiled for their exact sample count.
+TINY = 16
 
 
 # --------------------------------------------------------------------------- results
@@ -181,23 +184,18 @@ def _geometry_chunk(f, wi, wo, mask, weights, *, normalization, dtype):
 
 
 @functools.partial(jax.jit, static_argnames=("iso", "rtol", "check", "steps"))
-def _search_chunk(prepared, *, iso, rtol, check, steps=None):
-    return jax.vmap(lambda p: _varpro.solve_scanline(p, iso=iso, rtol=rtol, check=check, steps=steps))(prepared)
-
-
-@jax.jit
-def _sandwich_chunk(sol: _varpro.ScanlineSolution, f, u, v, g, w) -> _varpro.ScanlineSolution:
-    """``sol`` with ``cov`` replaced by :func:`~wardjax.fit._varpro.sandwich_covariance` (from the geometry stage)."""
-    scale = sol.chi2 / jnp.maximum(sol.dof, 1).astype(sol.chi2.dtype)
-    hc = jax.vmap(_varpro.sandwich_covariance)(jnp.log(sol.alpha), sol.rho_s, sol.cov_gn, scale, f, u, v, g, w)
-    return sol._replace(cov=hc)
+def _search_chunk(prepared, raw=None, *, iso, rtol, check, steps=None):
+    """The search of each prepared scanline; with ``raw`` (the geometry stage's arrays) the sandwich
+    covariance too, in the same program (a separate pass cost a third more CPU than the fold)."""
+    fit = lambda p, r: _varpro.solve_scanline(p, iso=iso, rtol=rtol, check=check, steps=steps, raw=r)
+    return jax.vmap(fit)(prepared, raw)
 
 
 def _fast_chunk(f, wi, wo, mask, weights, n, *, iso, rtol, normalization, dtype, check, sandwich, steps=None):
     # Geometry and moments as separate programs too: ~25 % less CPU than one.
     parts = _geometry_chunk(f, wi, wo, mask, weights, normalization=normalization, dtype=dtype)
-    sol = _search_chunk(moments_chunk(*parts, n, iso=iso), iso=iso, rtol=rtol, check=check, steps=steps)
-    return _sandwich_chunk(sol, *parts) if sandwich else sol
+    prepared = moments_chunk(*parts, n, iso=iso)
+    return _search_chunk(prepared, parts if sandwich else None, iso=iso, rtol=rtol, check=check, steps=steps)
 
 
 def _steps(max_steps) -> int | None:
@@ -349,10 +347,26 @@ def _default_chunk(dtype, devices) -> int:
     return _ACCELERATOR_CHUNK if limit >= 32 << 30 else _ACCELERATOR_CHUNK // 4
 
 
-def _placement(devices):
-    """How a chunk's rows are put on the devices: split along the scanline axis over a 1-D mesh."""
+def _placement(devices, direct: bool = True):
+    """How a chunk's rows are put on the devices: split along the scanline axis over a 1-D mesh.
+
+    Returns a function of one array. On the default device alone it returns NumPy arrays as they
+    are: the compiled call copies them itself, where ``device_put`` with a sharding costs about
+    3 ms of host time per array (the whole cost of a chunk of small problems). ``direct=False``:
+    always ``device_put`` (the profiles' few chunks, whose host-side inputs then stay visible).
+    """
+    if direct and len(devices) == 1 and devices[0] == jax.devices()[0]:
+        return lambda a: a
     mesh = jax.sharding.Mesh(np.asarray(devices), ("scanline",))
-    return jax.sharding.NamedSharding(mesh, jax.sharding.PartitionSpec("scanline"))
+    sharding = jax.sharding.NamedSharding(mesh, jax.sharding.PartitionSpec("scanline"))
+    return lambda a: jax.device_put(a, sharding)
+
+
+def _sample_bucket(n: int) -> int:
+    """Samples the fast kernel is compiled for: :func:`~wardjax._shapes.bucket` of ``n``, or ``n`` itself
+    up to :data:`TINY` samples, where padding would double the work (9 → 16) and each count compiles
+    once (a program per count from 1 to 16 at most)."""
+    return n if n <= TINY else _shapes.bucket(n)
 
 
 def _solve(
@@ -367,11 +381,11 @@ def _solve(
     (default ``jax.devices()``) along the scanline axis.
     """
     devices = _check_devices(devices)
-    sharding = _placement(devices)
+    put = _placement(devices)
     chunk *= len(devices)
     rtol = 0.0 if dtype == np.float64 else 64 * float(np.finfo(dtype).eps)
     n_rows, n_true = data[0].shape[0], data[0].shape[1]
-    n_pad = _shapes.bucket(n_true) if solver == "fast" else n_true
+    n_pad = _sample_bucket(n_true) if solver == "fast" else n_true
     if solver == "fast":
         data = pad_samples(data, n_pad)  # the sample axis only
     with jax.enable_x64(True):
@@ -382,7 +396,7 @@ def _solve(
         pieces = []
         for start, stop, rows in buckets(n_rows, chunk):
             rows = -(-rows // len(devices)) * len(devices)  # whole rows on every device
-            args = [None if a is None else jax.device_put(pad_rows(a[start:stop], rows), sharding) for a in data]
+            args = [None if a is None else put(pad_rows(a[start:stop], rows)) for a in data]
             if solver == "fast":
                 out = _fast_chunk(
                     *args,
@@ -411,13 +425,13 @@ def _profile_where_nonlinear(sol: _varpro.ScanlineSolution, data, *, normalizati
     split over ``devices`` along the scanline axis as :func:`_solve` splits the fits.
     """
     devices = _check_devices(devices)
-    sharding = _placement(devices)
+    put = _placement(devices, direct=False)
     rows = np.flatnonzero(sol.nonlinear.astype(bool) & (sol.status == Status.CONVERGED))
     if not rows.size:
         return
     sub = tuple(None if a is None else a[rows] for a in data)
     n_true = data[0].shape[1]
-    n_pad = _shapes.bucket(n_true)
+    n_pad = _sample_bucket(n_true)
     sub = pad_samples(sub, n_pad)
     # 33 profile points per row: at most a quarter of the fit's rows per call on an accelerator.
     chunk = min(_default_chunk(np.float64, devices), _ACCELERATOR_CHUNK // 4) * len(devices)
@@ -428,10 +442,10 @@ def _profile_where_nonlinear(sol: _varpro.ScanlineSolution, data, *, normalizati
         out = []
         for start, stop, size in buckets(rows.size, chunk):
             size = -(-size // len(devices)) * len(devices)  # whole rows on every device
-            args = [None if a is None else jax.device_put(pad_rows(a[start:stop], size), sharding) for a in sub]
+            args = [None if a is None else put(pad_rows(a[start:stop], size)) for a in sub]
             parts = _geometry_chunk(*args, normalization=normalization, dtype=np.dtype(np.float64))
             prepared = moments_chunk(*parts, n, iso=True)
-            pick = [jax.device_put(pad_rows(a[start:stop], size), sharding) for a in (*fit, scale)]
+            pick = [put(pad_rows(a[start:stop], size)) for a in (*fit, scale)]
             sig = _profile.profile_chunk(prepared, *pick)
             out.append(np.stack([np.asarray(v)[: stop - start] for v in sig], -1))
         sig = np.concatenate(out)
