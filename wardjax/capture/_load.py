@@ -154,8 +154,9 @@ def _extremes(source: ImageSource) -> tuple[int, int]:
         raise CaptureError(source.name, None, f"cannot read the image ({_reason(e)})") from None
 
 
-# Row pairs read, evenly spaced, for the lit image's neighbour correlation: a few hundred rows of any image.
-_PAIRS = 64
+# Blocks of adjacent rows read, evenly spaced, for the lit image's neighbour correlation: a few hundred rows of
+# any image, read as a few contiguous windows (a tiled image decodes each tile row once, not once per row pair).
+_BLOCKS, _BLOCK_ROWS = 8, 16
 # Fewer neighbouring pixel pairs than this say too little (random codes would spread by ± 0.05 about r = 0).
 _MIN_PAIRS = 400
 
@@ -163,15 +164,17 @@ _MIN_PAIRS = 400
 def _neighbour_correlation(source: ImageSource) -> float:
     """The larger of the horizontal and vertical lag-1 correlations of ``source``'s codes, averaged over channels.
 
-    Read from :data:`_PAIRS` pairs of adjacent rows spread over the image; NaN where they hold one value or
-    fewer than :data:`_MIN_PAIRS` pixel pairs (the estimate's spread, about ``1/√n``, would reach the rule's bound).
+    Read from at most :data:`_BLOCKS` windows of :data:`_BLOCK_ROWS` adjacent rows spread over the image;
+    NaN where they hold one value or fewer than :data:`_MIN_PAIRS` pixel pairs
+    (the estimate's spread, about ``1/√n``, would reach the rule's bound).
     """
     h, w = source.height, source.width
     if h < 2 or w < 2:
         return math.nan
-    starts = np.unique(np.linspace(0, h - 2, min(_PAIRS, h - 1)).round().astype(int))
+    n = min(_BLOCK_ROWS, h)  # windows start on multiples of n: whole strips or tiles of that height, none twice
+    starts = (np.unique(np.linspace(0, h // n - 1, min(_BLOCKS, h // n)).round().astype(int)) * n).tolist()
     try:
-        a = np.stack([source.read(slice(r, r + 2)) for r in starts]).astype(np.float64)  # (P, 2, W, 3)
+        blocks = [source.read(slice(r, r + n)).astype(np.float64) for r in starts]  # each (n, W, 3)
     except Exception as e:
         raise CaptureError(source.name, None, f"cannot read the image ({_reason(e)})") from None
 
@@ -183,9 +186,9 @@ def _neighbour_correlation(source: ImageSource) -> float:
         r = (x * y).sum(axis=0)[den > 0] / den[den > 0]
         return float(r.mean()) if r.size else math.nan
 
-    c = a.shape[-1]
-    horizontal = corr(a[:, :, :-1].reshape(-1, c), a[:, :, 1:].reshape(-1, c))
-    vertical = corr(a[:, 0].reshape(-1, c), a[:, 1].reshape(-1, c))
+    c = blocks[0].shape[-1]
+    horizontal = corr(*(np.concatenate([b[:, d : w - 1 + d].reshape(-1, c) for b in blocks]) for d in (0, 1)))
+    vertical = corr(*(np.concatenate([b[d : n - 1 + d].reshape(-1, c) for b in blocks]) for d in (0, 1)))
     return max(horizontal, vertical) if math.isfinite(horizontal) and math.isfinite(vertical) else math.nan
 
 
