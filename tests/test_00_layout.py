@@ -261,6 +261,7 @@ def _modes(folder: Path) -> dict[str, int]:
     return {str(p.relative_to(folder)): stat.S_IMODE(p.stat().st_mode) for p in folder.rglob("*") if p.is_file()}
 
 
+@pytest.mark.slow
 def test_every_output_has_the_umask_mode_and_no_temporary_survives(tmp_path, umask_022):
     from wardjax.run import main
 

@@ -213,6 +213,7 @@ def test_fast_path_agrees_with_optimistix_reference(iso_fit):
     np.testing.assert_allclose(fast.covariance[sl], ref.covariance, rtol=1e-4, atol=1e-14)
 
 
+@pytest.mark.slow
 def test_fast_path_agrees_with_jaxopt_levenberg_marquardt(iso_fit):
     """An independent LM implementation (test-only; jaxopt is unmaintained) finds the same optimum."""
     jaxopt = pytest.importorskip("jaxopt")
@@ -452,6 +453,7 @@ def test_padded_samples_leave_the_prepared_scanline_unchanged(rng, n):
         assert not np.any(np.asarray(getattr(padded, name))[..., m:]), name
 
 
+@pytest.mark.slow
 def test_device_arrays_stay_on_the_device_and_fit_the_same(iso_fit, monkeypatch):
     """``jax.Array`` inputs are fitted where they are: no host array larger than an index list is
     put on the device during the fit, and the results equal the NumPy inputs' — float64, float32

@@ -41,6 +41,7 @@ def test_csf_out_of_sample_scatter_exceeds_in_sample_fit():
         assert in_sample < cv < 0.2
 
 
+@pytest.mark.slow
 def test_known_alpha_inside_95_interval(model):
     rng = np.random.default_rng(2024)
     hits = []

@@ -80,6 +80,7 @@ def test_find_captures(captures, tmp_path):
     assert find_captures([tmp_path / "lonely"]) == [tmp_path / "lonely"]
 
 
+@pytest.mark.slow
 def test_killed_batch_reruns_to_the_uninterrupted_result(captures, tmp_path):
     # The killed run is a separate process with JAX's default settings; run the
     # in-process ones alike (tests/conftest.py raises on rank promotion, which

@@ -77,6 +77,7 @@ def test_absorbed_gamma_is_named_not_a_partial_match():
     assert abs(rep.steps[0].params["eps"] - case.truth["strength"]) < 4 * rep.steps[0].stderr["eps"]
 
 
+@pytest.mark.slow
 def test_solo_fits_equal_batched_fits(reports, monkeypatch):
     """Large data solve each fit alone instead of in vmapped batches: the same effects, gaps, parameters
     and evidence as the batched solve that small data use. A solo fit is not vmapped, so each inactive
@@ -318,6 +319,7 @@ def test_every_confusable_pair_says_what_would_tell_it_apart():
     assert pairs and pairs == set(_SEPARATE)
 
 
+@pytest.mark.slow
 def test_an_optional_parameter_must_pay_its_way():
     """The illumination field's tilt ``b_st`` is optional: on a pure ramp discovery adds the reduced form
     (``b_st`` held at 0, ``k = 1``, one ``ln N`` cheaper in ΔBIC); once the data carry a tilt as well, the

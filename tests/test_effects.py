@@ -187,6 +187,7 @@ def test_capture_noise_estimate_ignores_the_signal_gradient():
     assert abs(np.mean(((f - f0)[ok] / est[ok]) ** 2) - 1.0) < 0.05
 
 
+@pytest.mark.slow
 def test_flagged_clipped_values_are_censored_not_dropped():
     """Saturated values the sensor flags are fitted with the censored likelihood: without the lamp geometry
     the clip level varies along the scanlines and no plateau of ties shows, yet the flags name it."""

@@ -82,6 +82,7 @@ def test_01_model_at_the_true_parameters_is_the_render(renders, exponent):
     assert np.abs(np.asarray(f) / ref - 1).max() < 1e-4, RENDERER
 
 
+@pytest.mark.slow
 def test_02_directional_screen_is_named_and_closes_the_gap(renders):
     """cos³ screen modelled as Lambertian: a gap of ~10³; ``discover`` names directional emission first, the gap
     falls to the noise level, and the fitted exponent is the true 3 within its 1-σ error × 3 (and 2 %)."""

@@ -145,6 +145,7 @@ def captures(tmp_path_factory):
     return base
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("layout", ["tif", "tiles"])
 def test_a_banded_fit_equals_the_whole_image_fit(captures, layout):
     whole = wj.load_capture(captures / "png")

@@ -62,6 +62,7 @@ def test_reml_reads_the_correlation_between_scanlines_with_a_trend_present():
     assert info["sd"] == pytest.approx(0.01, rel=0.35)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("rho, most", [(0.0, 0.06), (0.85, 0.10)])
 def test_trend_across_scanlines_tested_near_its_nominal_level(rho, most):
     """Without a trend, the drop in ‖P ℓ‖² from fitting one across the scanlines (55 of them, as in a 160 × 120

@@ -10,6 +10,7 @@ from nbclient import NotebookClient
 NOTEBOOK = Path(__file__).parents[1] / "notebooks" / "alpha_uncertainty.ipynb"
 
 
+@pytest.mark.slow
 def test_alpha_uncertainty_notebook_runs():
     nb = nbformat.read(NOTEBOOK, as_version=4)
     t0 = time.perf_counter()

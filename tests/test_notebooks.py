@@ -26,6 +26,7 @@ def test_fit_folder_notebook_reports_honest_errors():
     assert 0.3 < rms_z < 2.0  # reported σ of the right size against the truth
 
 
+@pytest.mark.slow
 def test_texture_notebook_synthesis_keeps_the_statistics():
     text = _run("texture.ipynb")
     ks = [float(x) for x in text.split("each iteration: ")[1].splitlines()[0].split(" → ")]

@@ -183,6 +183,7 @@ def test_marble_without_texture_is_unbiased(tmp_path):
         assert abs(est - true) < 3 * se + 1e-4 * true, (k, est, se)
 
 
+@pytest.mark.slow
 def test_texture_field_covariance_white_noise_is_model_covariance(rng):
     # Unit check: with white noise of σ and no texture, Σ_Δ ĉ(Δ) R(Δ) = σ² A⁻¹, the
     # Gauss–Newton covariance; A is the fit's own information matrix.

@@ -157,6 +157,7 @@ def test_profile_equals_gauss_newton_where_chi2_is_quadratic():
     np.testing.assert_array_equal(auto.stderr.alpha_x[keep], gn.stderr.alpha_x[keep])
 
 
+@pytest.mark.slow
 def test_errors_choice_is_checked():
     rng = np.random.default_rng(43)
     _, f, wi, wo, sigma = blind_scanlines(rng, 2, (0.05, 0.1))

@@ -101,6 +101,7 @@ def test_fit_shows_the_stages_within_a_capture_and_takes_a_step_limit(capture):
     assert bad.exit_code == 2 and "--max-steps" in bad.stderr and len(bad.stderr.strip().splitlines()) == 1
 
 
+@pytest.mark.slow
 def test_more_steps_certify_more_scanlines_and_move_nothing_that_converged():
     truth = wj.WardParams(rho_d=(0.6, 0.5, 0.4), rho_s=0.04, alpha_x=0.12, alpha_y=0.12)
     d = wj.simulate_scanlines(truth, x_offsets=np.linspace(-40, 40, 48), seed=3)

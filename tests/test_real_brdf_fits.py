@@ -40,6 +40,7 @@ def test_csv_covers_every_material_model_and_normalisation():
     assert np.median(chi) > 5
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("index", [0, 30, 60])
 def test_rerun_of_three_curet_samples_matches_the_csv(index):
     rows, _ = _csv()

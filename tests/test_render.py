@@ -142,6 +142,7 @@ def test_06_texture_pattern_is_bilinear_in_the_grid():
     assert np.std(rad[m][:, 0] / ref[m][:, 0]) < 1e-5 and np.ptp(rho_d[m][:, 0]) > 0.2
 
 
+@pytest.mark.slow
 def test_07_jax_render_is_differentiable():
     """∂(image)/∂α and ∂(image)/∂lamp from jax.grad equal central differences."""
     rig = default_rig((16, 12))

@@ -55,6 +55,7 @@ def test_02_renderer_is_checked(tmp_path):
         wj.simulate_capture(TRUTH, tmp_path / "b", renderer="radiance", normalization="ward1992", image_size=(32, 24))
 
 
+@pytest.mark.slow
 def test_03_command_line(tmp_path):
     res = CliRunner().invoke(main, ["simulate", str(tmp_path / "c"), "--renderer", "radiance", "--size", "64", "48"])
     assert res.exit_code == 0, res.output

@@ -411,6 +411,7 @@ def tiny_model():
     return wj.analyze_texture(procedural_texture("marble", (32, 40), seed=4), height=2, n_quantiles=33)
 
 
+@pytest.mark.slow
 def test_05_synthesis_is_deterministic_and_clamps(tiny_model):
     a = wj.synthesize_texture(tiny_model, (24, 40), seed=7, iterations=2)
     b = wj.synthesize_texture(tiny_model, (24, 40), seed=7, iterations=2)
@@ -432,6 +433,7 @@ def test_05_synthesis_is_deterministic_and_clamps(tiny_model):
         wj.synthesize_texture(tiny_model, (24, 40), match="sorted")
 
 
+@pytest.mark.slow
 def test_05_same_seed_gives_the_same_bits_at_a_threaded_size():
     """Analysis and synthesis are bit-reproducible where XLA would split FFTs and sums over threads.
 
@@ -531,6 +533,7 @@ def test_06_limitation_regular_texture_is_lost(tmp_path):
 # ============================================================ 7. command line
 
 
+@pytest.mark.slow
 def test_07_cli_analyze_and_synthesize(tmp_path):
     import tifffile
     from click.testing import CliRunner
