@@ -24,6 +24,7 @@ from test_photo_capture import CAMS, LIGHTS, TRUTH, _grid, _render
 import wardjax as wj
 from wardjax._files import encode_image, read_image, write_image
 from wardjax.run._cli import main
+from wardjax.run._heldout_figure import heldout_figure
 
 DATA = Path(__file__).parent / "data" / "flash"
 NOISE = 0.004
@@ -67,6 +68,18 @@ def test_01_multiview_lobe_and_held_out_photo(multiview):
     # the new view predicted to the noise: its own noise plus that of ρd from the other 3 photos, √(1 + 1/3) = 1.15
     assert ho.rmse_linear / ho.rmse_noise == pytest.approx(np.sqrt(1 + 1 / 3), abs=0.1)
     assert ho.psnr == pytest.approx(20 * np.log10(1 / ho.rmse_display))
+    # heldout.png: each panel has pixel axes, a title and a colour bar with its unit; photo and prediction on one scale
+    fig = heldout_figure(ho)
+    panels = [ax for ax in fig.axes if ax.get_images()]
+    assert len(panels) == 3 and len(fig.axes) == 6  # three images, three colour bars
+    for ax in panels:
+        assert ax.get_xlabel() == "x (pixels)" and ax.get_ylabel() == "y (pixels)" and ax.get_title()
+    units = [ax.get_ylabel() for ax in fig.axes if not ax.get_images()]
+    assert units[0] == units[1] == "linear value (mean of channels, full scale 1)" and "noise σ" in units[2]
+    (photo,), (pred,), (resid,) = (ax.get_images() for ax in panels)
+    assert photo.get_clim() == pred.get_clim() and -resid.get_clim()[0] == resid.get_clim()[1] >= 3
+    # the residual panel in noise σ: about unit spread where the prediction is right
+    assert 0.8 < np.nanstd(resid.get_array()) < 1.5
 
 
 def test_02_cli_fit_hold_out_writes_the_panel(multiview, tmp_path):
@@ -84,7 +97,7 @@ def test_02_cli_fit_hold_out_writes_the_panel(multiview, tmp_path):
     assert float(row["weighted_chi2_per_dof"]) == pytest.approx(doc["fit"]["reduced_chi2"], rel=1e-5)
     assert 0.8 < float(row["weighted_chi2_per_dof"]) < 1.25
     panel = read_image(d / "heldout.png")
-    assert panel.shape == (24, 3 * 32 + 8, 3)  # photo | prediction | residual
+    assert panel.ndim == 3 and panel.shape[1] > 2 * panel.shape[0]  # photo | prediction | residual, side by side
     assert read_image(d / "rho_d_sigma.tif", rgb=False).shape == (24, 32, 3)
     assert "Held-out photo 2" in (d / "report.md").read_text()
 

@@ -46,6 +46,8 @@ class HeldOut:
         The RMSE the pixel noise alone gives (linear), for comparison with ``rmse_linear``.
     pixels
         Pixels compared.
+    sigma
+        ``(H, W, C)`` the noise model's σ of each linear value of the photo (NaN where not compared).
     """
 
     k: int
@@ -58,6 +60,7 @@ class HeldOut:
     psnr: float
     rmse_noise: float
     pixels: int
+    sigma: np.ndarray
 
     def summary(self) -> dict:
         return {
@@ -201,7 +204,8 @@ def _held_out(cap: PhotoCapture, k: int, f_pred: np.ndarray, crop) -> HeldOut:
     diff = (pred - photo)[ok]
     disp = cap.display(np.clip(pred, 0, 1))[ok] - cap.display(photo)[ok]
     rmse_d = float(np.sqrt(np.mean(disp**2)))
-    sig_v = (cap.sigma[crop][:, :, k] * cap.scale[crop][:, :, k])[ok]
+    sig = cap.sigma[crop][:, :, k] * cap.scale[crop][:, :, k]
+    sig_v = sig[ok]
     nan = np.where(ok[..., None], 1.0, np.nan)
     return HeldOut(
         k,
@@ -214,6 +218,7 @@ def _held_out(cap: PhotoCapture, k: int, f_pred: np.ndarray, crop) -> HeldOut:
         float(20 * np.log10(1.0 / max(rmse_d, 1e-12))),
         float(np.sqrt(np.mean(sig_v**2))),
         int(ok.sum()),
+        sig * nan,
     )
 
 
@@ -222,17 +227,6 @@ def _held_out(cap: PhotoCapture, k: int, f_pred: np.ndarray, crop) -> HeldOut:
 
 def _lobes(res, field: str) -> list[float]:
     return np.atleast_1d(np.asarray(getattr(res, field), np.float64)).ravel().tolist()
-
-
-def side_by_side(cap: PhotoCapture, held: HeldOut, gain: float = 4.0) -> np.ndarray:
-    """``(H, 3W + 2·gap, 3)`` uint8: photo | prediction | residual (display values; residual ×gain around grey)."""
-    a = cap.display(np.clip(np.nan_to_num(held.photo), 0, 1))
-    b = cap.display(np.clip(np.nan_to_num(held.prediction), 0, 1))
-    r = np.clip(0.5 + gain * (b - a), 0, 1)
-    h = a.shape[0]
-    gap = np.ones((h, 4, 3))
-    panel = np.concatenate([a, gap, b, gap, r], axis=1)
-    return np.rint(255 * panel).astype(np.uint8)
 
 
 def write_photo_outputs(fit: PhotoFit, out_dir, *, created: str) -> dict:
@@ -265,7 +259,9 @@ def write_photo_outputs(fit: PhotoFit, out_dir, *, created: str) -> dict:
     write_bytes_atomic(out / "maps.npz", buf.getvalue())
     files = {"rho_d": "rho_d.tif", "rho_d_png": "rho_d.png", "rho_d_sigma": "rho_d_sigma.tif", "maps": "maps.npz"}
     if fit.held_out is not None:
-        write_image(out / "heldout.png", side_by_side(cap, fit.held_out))
+        from ._heldout_figure import heldout_png
+
+        write_bytes_atomic(out / "heldout.png", heldout_png(fit.held_out))
         files["heldout"] = "heldout.png"
     chi2, dof = float(getattr(res, "chi2", np.nan)), int(getattr(res, "dof", 0))
     fit_doc = {
@@ -376,7 +372,7 @@ def report_text(fit: PhotoFit, params: WardParams, stderr: WardParams, doc: dict
             f"Held-out photo {ho.k} ({ho.name}), predicted from the other {len(fit.photos_fitted)}: "
             f"RMSE {ho.rmse_linear:.4g} linear ({ho.rmse_linear / ho.rmse_noise:.2f}× the noise, {ho.rmse_noise:.3g}), "
             f"{ho.rmse_display:.4g} display, PSNR {ho.psnr:.2f} dB over {ho.pixels} pixels. "
-            "heldout.png: photo | prediction | residual (×4 around grey).",
+            "heldout.png: photo | prediction (linear values, one scale) | residual (in noise σ).",
         ]
     return "\n".join(lines) + "\n"
 
