@@ -78,18 +78,33 @@ def diagnose(folder: Path):
     return diagnose_photo_capture(wj.load_capture(folder), progress=lambda _: None)
 
 
+def _short(rep) -> str:
+    """The verdict in a few words: within the noise, or unexplained and where the residual lives."""
+    if rep.within_noise:
+        text = "within the noise"
+    else:
+        band = max(rep.where["bands"], key=lambda b: b["chi2_share"] / max(b["obs_share"], 1e-12))
+        text = (
+            f"unexplained: the {band['band']} holds {100 * band['chi2_share']:.0f} % of χ² on "
+            f"{100 * band['obs_share']:.0f} % of the views"
+        )
+    if rep.unphysical and rep.unphysical[0]["step"] == 0:
+        text += "; baseline lobe not physical"
+    return text + "".join(f"; {n} not identifiable" for n in rep.not_identifiable)
+
+
 def _row(label: str, rep, seconds: float) -> str:
     named = ", ".join(rep.found) or "nothing"
-    named += "".join(f" (or {b})" for _, b, _ in rep.ambiguous)
+    named += "".join(f" (or {b})" for _, b, _ in rep.not_told_apart)
     gaps = " → ".join(f"{g:.4g}" for g in rep.gap)
-    return f"| {label} | {named} | {gaps} | {seconds:.0f} |"
+    return f"| {label} | {named} | {gaps} | {_short(rep)} | {seconds:.0f} |"
 
 
 def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--renders", action="store_true", help="the multiview renders only")
     args = ap.parse_args(argv)
-    print("| capture | named | gap per step | s |\n|---|---|---|---|")
+    print("| capture | named | gap per step | verdict | s |\n|---|---|---|---|---|")
     if not args.renders:
         for cap in sorted(p for p in REAL.iterdir() if (p / "capture.toml").is_file()):
             t = time.perf_counter()

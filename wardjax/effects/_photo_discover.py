@@ -38,12 +38,15 @@ import dataclasses
 import math
 import time
 from collections.abc import Callable, Sequence
+from typing import NamedTuple
 
 import numpy as np
 from scipy.special import chdtrc
 
 from ._evidence import _NOISE_Z, _dominant_first, _gap_p
 from ._holdout import HOLDOUT_SHARE
+from ._photo_checks import not_identifiable, residual_where, unphysical
+from ._photo_held import HeldStructure, chi2_gains_held, fit_gains_held
 from ._photo_model import RADIAL, PhotoData
 from ._photo_report import PhotoDiscoveryReport, PhotoStep, lobes_table
 from ._photo_states import STRUCTURAL, PhotoState, StateFit, fit_state, held_chi2
@@ -71,6 +74,22 @@ def _k(name: str, fit: StateFit) -> int:
     return 2 * int(ev.get("normals", {}).get("n_pixels", 0))
 
 
+def _candidate(name: str, k: int, dchi2: float, cur: StateFit, chi2_new: float, ln_n: float) -> Candidate:
+    p = float(chdtrc(k, dchi2)) if k > 0 and dchi2 > 0 else 1.0
+    excess = max(cur.chi2 - cur.dof, 1e-300)
+    return Candidate(
+        effect=name,
+        k=k,
+        delta_chi2=float(dchi2),
+        delta_bic=float(dchi2 - k * ln_n),
+        p_value=p,
+        explained=float(dchi2 / excess),
+        structure_p=math.nan,
+        physical=True,
+        gap_p_after=_gap_p(chi2_new, max(cur.dof - k, 1)),
+    )
+
+
 def _score(name: str, state: PhotoState, cur: StateFit, ref: Callable[[], StateFit], data: PhotoData, ln_n: float):
     """The candidate ``name`` on top of ``state``: its :class:`Candidate` and fit."""
     new = fit_state(state.plus(name), data, start=cur.shared)
@@ -80,20 +99,22 @@ def _score(name: str, state: PhotoState, cur: StateFit, ref: Callable[[], StateF
     if name == "varying_specular" and k > 0:  # the mixture's deviance, which prices each problem's choice of lobe
         bic = getattr(new.pixel, "evidence", {})["clusters"]["bic"]
         dchi2 = bic[1] - bic[k // 3 + 1] + k * ln_n
-    p = float(chdtrc(k, dchi2)) if k > 0 and dchi2 > 0 else 1.0
-    excess = max(cur.chi2 - cur.dof, 1e-300)
-    cand = Candidate(
-        effect=name,
-        k=k,
-        delta_chi2=float(dchi2),
-        delta_bic=float(dchi2 - k * ln_n),
-        p_value=p,
-        explained=float(dchi2 / excess),
-        structure_p=math.nan,
-        physical=True,
-        gap_p_after=_gap_p(new.chi2, new.dof),
-    )
-    return cand, new
+    return _candidate(name, k, dchi2, cur, new.chi2, ln_n), new
+
+
+class _Held(NamedTuple):
+    """The current structure held (:mod:`._photo_held`) and the current gains refitted on it."""
+
+    structure: HeldStructure
+    base: object  # SharedFit
+
+
+def _score_held(name: str, state: PhotoState, cur: StateFit, held: _Held, data: PhotoData, ln_n: float):
+    """A radial candidate on the current structure held: its :class:`Candidate` and its gains (a ``SharedFit``)."""
+    names = (*state.radial, name)
+    new = fit_gains_held(names, data, held.structure, cur.shared)
+    k = len(RADIAL[name].params)
+    return _candidate(name, k, held.base.chi2 - new.chi2, cur, new.chi2, ln_n), new  # pyright: ignore[reportAttributeAccessIssue]
 
 
 def _halves(state: PhotoState, data: PhotoData) -> tuple[np.ndarray, np.ndarray] | None:
@@ -109,16 +130,28 @@ def _halves(state: PhotoState, data: PhotoData) -> tuple[np.ndarray, np.ndarray]
     return a, b
 
 
-def holdout(cur: PhotoState, new: PhotoState, data: PhotoData, dchi2: float, start) -> HoldoutRead | None:
-    """Both models fitted on each half predict the other; ``None`` where the data have no two halves."""
+def holdout(
+    cur: PhotoState, new: PhotoState, data: PhotoData, dchi2: float, start, held: _Held | None = None
+) -> HoldoutRead | None:
+    """Both models fitted on each half predict the other; ``None`` where the data have no two halves.
+
+    With ``held`` (a radial candidate on a model with structure) the structure stays as fitted to all the
+    data and only the gains are fitted on each half (:mod:`._photo_held`).
+    """
     halves = _halves(new, data)
     if halves is None:
         return None
     gain = 0.0
     for train, test in (halves, halves[::-1]):
-        fc = fit_state(cur, data, train, start=start, pixels=bool(new.structural))
-        fn = fit_state(new, data, train, start=start)
-        g = held_chi2(fc, cur, data, test, train) - held_chi2(fn, new, data, test, train)
+        if held is not None:
+            hs = held.structure
+            fc = fit_gains_held(cur.radial, data, hs, start, train)
+            fn = fit_gains_held(new.radial, data, hs, start, train)
+            g = chi2_gains_held(fc, cur.radial, data, hs, test) - chi2_gains_held(fn, new.radial, data, hs, test)
+        else:
+            fc = fit_state(cur, data, train, start=start, pixels=bool(new.structural))
+            fn = fit_state(new, data, train, start=start)
+            g = held_chi2(fc, cur, data, test, train) - held_chi2(fn, new, data, test, train)
         if not math.isfinite(g):
             return None
         gain += g
@@ -183,45 +216,39 @@ def discover_photo(
         raise ValueError(f"{name or 'the capture'} has {data.n_obs} usable observations; discovery needs 10 or more")
     t0 = time.time()
     ln_n = math.log(max(data.n_obs, 2))
+    skipped = {n: why for n, why in not_identifiable(data).items() if n in names}
+    names = tuple(n for n in names if n not in skipped)
     state, cur = PhotoState(), fit_state(PhotoState(), data)
-    baseline, gaps, steps, partial, ambiguous = cur, [cur.gap], [], [], []
+    baseline, gaps, steps, partial, ambiguous, broken = cur, [cur.gap], [], [], [], []
     for _ in range(max_steps):
         if steps and _within_noise(cur):
             break
         remaining = [n for n in names if n not in (*state.radial, *state.structural)]
         if not remaining:
             break
-        progress(f"step {len(steps) + 1}: testing {len(remaining)} candidate effects ({', '.join(remaining)})")
-        ref: list[StateFit] = []
-
-        def on_pixels(state=state) -> StateFit:
-            if not ref:
-                ref.append(fit_state(state, data, pixels=True))
-            return ref[0]
-
-        scored = {c.effect: (c, f) for c, f in (_score(n, state, cur, on_pixels, data, ln_n) for n in remaining)}
-        cands = _dominant_first(sorted((c for c, _ in scored.values()), key=lambda c: -c.delta_bic))
-        chosen = None
-        for c in cands:
-            if not (c.delta_bic > 0 and c.p_value * len(remaining) < alpha):
-                break
-            progress(f"step {len(steps) + 1}: hold-out check of {c.effect}")
-            hold = holdout(state, state.plus(c.effect), data, c.delta_chi2, cur.shared)
-            c = dataclasses.replace(c, holdout=hold)
-            if hold is not None and not hold.passed:
-                partial.append(c)
-                continue
-            chosen = c
+        why = unphysical(cur, state, data)
+        if why:
+            progress(f"step {len(steps) + 1}: the lobe is no material's ({why}); radial effects first, lobe bounded")
+            if not (state.structural or state.bounded):  # refit with the lobe held physical: no lobe to build on
+                before, state = cur, dataclasses.replace(state, bounded=True)
+                cur = fit_state(state, data, start=cur.shared)
+                broken.append({"step": len(steps), "why": why, "gap": before.gap, "gap_bounded": cur.gap})
+            else:
+                broken.append({"step": len(steps), "why": why, "gap": cur.gap, "gap_bounded": None})
+        found = _step(state, cur, remaining, bool(why), data, ln_n, alpha, len(steps) + 1, progress)
+        partial += found.partial
+        if found.chosen is None:
+            if state.bounded and not steps:  # nothing found on the bounded lobe: the baseline as fitted stands
+                state, cur = PhotoState(), baseline
             break
-        if chosen is None:
-            break
-        new = scored[chosen.effect][1]
-        ambiguous += _ambiguous(chosen, cands, data)
+        chosen, new = found.chosen, found.fit
+        ambiguous += _ambiguous(chosen, found.candidates, data)
         params, sigma = _step_params(chosen.effect, new)
         title = RADIAL[chosen.effect].title if chosen.effect in RADIAL else STRUCTURAL[chosen.effect]
-        steps.append(PhotoStep(chosen.effect, title, params, sigma, chosen, cands, cur.gap, new.gap))
+        steps.append(PhotoStep(chosen.effect, title, params, sigma, chosen, found.candidates, cur.gap, new.gap))
         state, cur = state.plus(chosen.effect), new
         gaps.append(cur.gap)
+    progress("where the residual lives")
     return PhotoDiscoveryReport(
         name=name,
         n_obs=data.n_obs,
@@ -240,4 +267,61 @@ def discover_photo(
         lamp_offset=data.lamp_offset,
         settings={"alpha": alpha, "max_steps": max_steps, "candidates": list(names), "holdout_share": HOLDOUT_SHARE},
         seconds=time.time() - t0,
+        n_photos=data.n_photos,
+        not_identifiable=skipped,
+        unphysical=broken,
+        where=residual_where(cur, state, data),
     )
+
+
+class _Found(NamedTuple):
+    chosen: Candidate | None
+    fit: StateFit | None
+    candidates: list
+    partial: list
+
+
+def _step(state, cur, remaining, radial_first, data, ln_n, alpha, i, progress) -> _Found:
+    """One step: score the candidates (the radial ones alone first when ``radial_first``), the best that passes
+    its evidence and hold-out chosen, refitted in full where it was scored on a held structure."""
+    held = None
+    if state.structural:
+        hs = HeldStructure.of(cur.pixel, data)
+        held = _Held(hs, fit_gains_held(state.radial, data, hs, cur.shared))
+    groups = [[n for n in remaining if n in RADIAL], [n for n in remaining if n not in RADIAL]]
+    groups = [g for g in groups if g] if radial_first else [remaining]
+    ref: list[StateFit] = []
+
+    def on_pixels() -> StateFit:
+        if not ref:
+            ref.append(fit_state(state, data, pixels=True))
+        return ref[0]
+
+    all_cands, partial = [], []
+    for group in groups:
+        progress(f"step {i}: testing {len(group)} candidate effects ({', '.join(group)})")
+        scored = {}
+        for n in group:
+            if held is not None and n in RADIAL:
+                c, fit = _score_held(n, state, cur, held, data, ln_n)
+            else:
+                c, fit = _score(n, state, cur, on_pixels, data, ln_n)
+            scored[n] = (c, fit)
+        cands = _dominant_first(sorted((c for c, _ in scored.values()), key=lambda c: -c.delta_bic))
+        all_cands += cands
+        for c in cands:
+            if not (c.delta_bic > 0 and c.p_value * len(remaining) < alpha):
+                break
+            progress(f"step {i}: hold-out check of {c.effect}")
+            on_held = held if c.effect in RADIAL else None
+            hold = holdout(state, state.plus(c.effect), data, c.delta_chi2, cur.shared, on_held)
+            c = dataclasses.replace(c, holdout=hold)
+            if hold is not None and not hold.passed:
+                partial.append(c)
+                continue
+            fit = scored[c.effect][1]
+            if on_held is not None:
+                progress(f"step {i}: {c.effect} refitted with the structure")
+                fit = fit_state(state.plus(c.effect), data, start=cur.shared, gains_from=fit)
+            return _Found(c, fit, all_cands, partial)
+    return _Found(None, None, all_cands, partial)

@@ -44,11 +44,24 @@ import numpy as np
 
 from ..ward import ward_geometry
 
-__all__ = ["RADIAL", "PhotoData", "RadialEffect", "SharedFit", "chi2_held", "fit_shared", "gains", "photo_covariates"]
+__all__ = [
+    "BOUNDED",
+    "RADIAL",
+    "PhotoData",
+    "RadialEffect",
+    "SharedFit",
+    "chi2_held",
+    "fit_shared",
+    "gains",
+    "photo_covariates",
+    "shared_residuals",
+    "shared_rho_d",
+]
 
 _LOG_ALPHA = (math.log(1e-3), math.log(2.0))  # α searched within [1e-3, 2], as wj.fit_pixels
 _GRID = np.linspace(math.log(0.005), 0.0, 15)  # starting log α
 _MIN_GAIN = 1e-3  # a gain at or below this on a fitted view is no lens or lamp
+BOUNDED = {"alpha": 1.0, "rho_s": 1.0}  # the largest α and ρs of a lobe held within what a material has
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -107,6 +120,11 @@ class PhotoData:
     @property
     def n_channels(self) -> int:
         return int(self.f.shape[-1])
+
+    @property
+    def n_photos(self) -> int:
+        """``K``: each problem's views are its ``block²`` pixels in each of ``K`` photos."""
+        return max(int(self.f.shape[1]) // (self.grid[2] ** 2), 1)
 
 
 def _meet(points: np.ndarray, dirs: np.ndarray) -> np.ndarray:
@@ -199,8 +217,9 @@ def _lobe(data: PhotoData, geom, log_alpha: float) -> np.ndarray:
     return n * np.exp(-(u + v) / a2) / a2
 
 
-def _projected(f, w, lobe, s=None):
-    """Residuals ``√w (f − a − s L)`` with ``a`` (per problem and channel) and, unless given, ``s ≥ 0`` profiled."""
+def _projected(f, w, lobe, s=None, s_max=math.inf):
+    """Residuals ``√w (f − a − s L)`` with ``a`` (per problem and channel) and, unless given, ``0 ≤ s ≤ s_max``
+    profiled."""
     s0 = w.sum(1)
     ok = s0 > 0
     inv = np.where(ok, 1.0 / np.where(ok, s0, 1.0), 0.0)
@@ -210,7 +229,7 @@ def _projected(f, w, lobe, s=None):
     lt = lobe[..., None] - lm[:, None]
     if s is None:
         bb = float(np.sum(w * lt * lt))
-        s = max(float(np.sum(w * ft * lt)), 0.0) / bb if bb > 0 else 0.0
+        s = min(max(float(np.sum(w * ft * lt)), 0.0) / bb if bb > 0 else 0.0, s_max)
     return np.sqrt(w) * (ft - s * lt), s
 
 
@@ -223,13 +242,13 @@ def _split(x: np.ndarray, names: tuple[str, ...]) -> dict[str, np.ndarray]:
     return out
 
 
-def _residuals(x, data, geom, names, keep, s=None):
+def _residuals(x, data, geom, names, keep, s=None, s_max=math.inf):
     g = _gain(data, _split(x, names))
     w = data.w * keep[..., None]
     if np.any(g[keep & np.any(w > 0, -1)] <= _MIN_GAIN):
         return np.full(data.f.size, 1e6), 0.0
     gg = g[..., None]
-    return _projected(data.f / gg, w * gg * gg, _lobe(data, geom, float(x[0])), s)
+    return _projected(data.f / gg, w * gg * gg, _lobe(data, geom, float(x[0])), s, s_max)
 
 
 def fit_shared(
@@ -237,11 +256,13 @@ def fit_shared(
     names: tuple[str, ...] = (),
     keep: np.ndarray | None = None,
     start: SharedFit | None = None,
+    bounded: bool = False,
 ) -> SharedFit:
     """Fit the shared lobe and the radial gains ``names`` to the views ``keep (P, V)`` (default all).
 
     ``start``: a fit made before, whose α and gains start this one (other gains start at 0, no effect);
-    without it α starts from the best of a grid.
+    without it α starts from the best of a grid. ``bounded``: the lobe held within what a material has,
+    ``α ≤ 1`` and ``ρs ≤ 1`` (:data:`BOUNDED`).
     """
     from scipy.optimize import least_squares
 
@@ -249,18 +270,21 @@ def fit_shared(
     geom = data.lobe_geometry
     before = {} if start is None else start.effects
     theta0 = [v for n in names for v in (before.get(n) or (0.0,) * len(RADIAL[n].params))]
+    s_max, top = (BOUNDED["rho_s"], math.log(BOUNDED["alpha"])) if bounded else (math.inf, _LOG_ALPHA[1])
     lo = [_LOG_ALPHA[0]] + [b[0] for n in names for b in RADIAL[n].bounds]
-    hi = [_LOG_ALPHA[1]] + [b[1] for n in names for b in RADIAL[n].bounds]
+    hi = [top] + [b[1] for n in names for b in RADIAL[n].bounds]
+
+    def res(x):
+        return _residuals(x, data, geom, names, keep, s_max=s_max)
+
     if start is None:
-        costs = [float(np.sum(_residuals(np.array([t, *theta0]), data, geom, names, keep)[0] ** 2)) for t in _GRID]
+        costs = [float(np.sum(res(np.array([t, *theta0]))[0] ** 2)) for t in _GRID]
         log_alpha = float(_GRID[int(np.argmin(costs))])
     else:
         log_alpha = math.log(start.alpha)
     x0 = np.clip(np.array([log_alpha, *theta0]), np.add(lo, 1e-9), np.subtract(hi, 1e-9))
-    sol = least_squares(
-        lambda x: _residuals(x, data, geom, names, keep)[0].ravel(), x0, bounds=(lo, hi), x_scale=1.0, method="trf"
-    )
-    r, s = _residuals(sol.x, data, geom, names, keep)
+    sol = least_squares(lambda x: res(x)[0].ravel(), x0, bounds=(lo, hi), x_scale=1.0, method="trf")
+    r, s = res(sol.x)
     chi2 = float(np.sum(r**2))
     w = data.w * keep[..., None]
     n_obs = int(np.sum(w > 0))
@@ -286,3 +310,19 @@ def chi2_held(data: PhotoData, fit: SharedFit, names: tuple[str, ...], keep: np.
 def gains(data: PhotoData, effects: dict[str, tuple[float, ...]]) -> np.ndarray:
     """``(P, V)`` the product of the fitted radial gains (1 without any)."""
     return _gain(data, {n: np.asarray(t) for n, t in effects.items()})
+
+
+def shared_residuals(data: PhotoData, fit: SharedFit, names: tuple[str, ...]) -> np.ndarray:
+    """``(P, V, C)`` the weighted residuals ``√w (f − G (a + s L))`` of ``fit`` on every view (ρd profiled)."""
+    r, _ = _residuals(fit.x, data, data.lobe_geometry, names, np.ones(data.radius2.shape, bool), s=fit.rho_s)
+    return r
+
+
+def shared_rho_d(data: PhotoData, fit: SharedFit, names: tuple[str, ...]) -> np.ndarray:
+    """``(P, C)`` each problem's ρd under ``fit`` (``π a``, ``a`` the weighted mean of ``f/G − s L``; NaN unseen)."""
+    g = _gain(data, _split(fit.x, names))[..., None]
+    w = data.w * g * g
+    lobe = _lobe(data, data.lobe_geometry, float(fit.x[0]))[..., None]
+    sw = w.sum(1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        return np.where(sw > 0, np.pi * np.sum(w * (data.f / g - fit.rho_s * lobe), 1) / sw, np.nan)

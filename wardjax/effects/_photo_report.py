@@ -2,7 +2,8 @@
 
 :meth:`PhotoDiscoveryReport.save` writes ``report.json``, ``report.md``,
 ``gap.png`` (the gap per step), ``labels.png`` (each pixel coloured by the
-lobe it carries) and ``labels.npy`` (the same as integers), each file
+lobe it carries), ``labels.npy`` (the same as integers) and ``residual.png``
+(each block's χ² per observation), each file
 atomically — what ``wardjax diagnose`` writes for a photograph capture.
 """
 
@@ -18,6 +19,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from .._files import write_bytes_atomic
+from ._photo_checks import where_text
 from ._report import Candidate, _num, gap_figure
 
 if TYPE_CHECKING:
@@ -31,7 +33,7 @@ _PALETTE = np.array(
     np.uint8,
 )
 _NOTHING = "nothing needed: the gap is within the noise"
-_REMAINS = "the gap still exceeds the noise: structure remains that no library effect explains"
+_UNEXPLAINED = "unexplained: the gap stays {gap:.3g}× the noise and no library effect explains the rest"
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -71,6 +73,11 @@ def lobes_table(fit: StateFit) -> list[dict]:
     ]
 
 
+def _where_dict(where: dict) -> dict:
+    out = {k: v for k, v in where.items() if k != "chi2_map"}
+    return out | {"map": "residual.png"}
+
+
 def _pm(v, s) -> str:
     if v is None:
         return "–"
@@ -102,6 +109,16 @@ class PhotoDiscoveryReport:
         ``(rows, columns, block)`` of the problems in the image.
     within_noise
         The final gap is within what the noise gives (``χ² − dof ≤ 2 √(2 dof)``).
+    n_photos
+        Photos each problem is seen in.
+    not_identifiable
+        Candidates not tried, each with why the data cannot identify it.
+    unphysical
+        ``{step, why, gap, gap_bounded}``: the model a step started from had a lobe no material has; that
+        step tried the radial effects first, with the shared lobe held within ``α ≤ 1``, ``ρs ≤ 1``
+        (``gap_bounded`` its gap so held; ``None`` where the lobes were per cluster and could not be held).
+    where
+        Where the final residual lives (:func:`wardjax.effects._photo_checks.residual_where`).
     """
 
     name: str
@@ -121,15 +138,34 @@ class PhotoDiscoveryReport:
     lamp_offset: float
     settings: dict
     seconds: float
+    n_photos: int = 1
+    not_identifiable: dict = dataclasses.field(default_factory=dict)
+    unphysical: list = dataclasses.field(default_factory=list)
+    where: dict | None = None
+
+    @property
+    def not_told_apart(self) -> list:
+        """The entries of ``ambiguous`` whose other effect was not named itself in a later step."""
+        return [a for a in self.ambiguous if a[1] not in self.found]
 
     def verdict(self) -> str:
         named = ", ".join(self.found)
-        named += "".join(f" (or {b}: not told apart)" for _, b, _ in self.ambiguous)
+        named += "".join(f" (or {b}: not told apart)" for _, b, _ in self.not_told_apart)
         if self.within_noise:
-            return f"found {named}; the gap is within the noise" if self.found else _NOTHING
-        if self.found:
-            return f"found {named}, but {_REMAINS}"
-        return "unexplained discrepancy: no library effect explains it"
+            text = f"found {named}; the gap is within the noise" if self.found else _NOTHING
+        else:
+            text = _UNEXPLAINED.format(gap=self.gap[-1])
+            text = f"found {named}, but {text}" if self.found else text
+            if self.where is not None:
+                text += f" ({where_text(self.where, self.n_photos)})"
+        notes = [
+            f"the paper's model has a lobe no material has ({u['why']}): radial effects tried first, on a lobe held "
+            f"within α ≤ 1, ρs ≤ 1"
+            for u in self.unphysical[:1]
+            if u["step"] == 0
+        ]
+        notes += [f"{n} not tried ({why})" for n, why in self.not_identifiable.items()]
+        return "; ".join([text, *notes])
 
     def label_image(self) -> np.ndarray:
         """``(rows · block, columns · block)`` the lobe each pixel carries."""
@@ -167,6 +203,10 @@ class PhotoDiscoveryReport:
             "lobes": [{k: _num(v) for k, v in lb.items()} for lb in self.lobes],
             "labels": {"file": "labels.npy", "image": "labels.png", "grid": list(self.grid)},
             "lamp_offset": _num(self.lamp_offset),
+            "n_photos": self.n_photos,
+            "not_identifiable": dict(self.not_identifiable),
+            "unphysical": [{k: _num(v) if isinstance(v, float) else v for k, v in u.items()} for u in self.unphysical],
+            "residual": None if self.where is None else _where_dict(self.where),
             "settings": self.settings,
             "seconds": _num(self.seconds),
         }
@@ -202,14 +242,14 @@ class PhotoDiscoveryReport:
                 for c in s.candidates
             ]
             L.append("")
-        if self.ambiguous:
+        if self.not_told_apart:
             L.append("## Not told apart\n")
             why = (
                 "the lamp is at the lens: lens and lamp see every point at nearly the same angle"
                 if self.lamp_offset < 0.05
                 else "their ΔBIC are close"
             )
-            L += [f"- {a} or {o} (ΔBIC differs by {d:.1f}): {why}." for a, o, d in self.ambiguous]
+            L += [f"- {a} or {o} (ΔBIC differs by {d:.1f}): {why}." for a, o, d in self.not_told_apart]
             L.append("")
         if self.partial:
             L.append("## Supported, but not predicting the held-out half (not named)\n")
@@ -220,6 +260,30 @@ class PhotoDiscoveryReport:
                 if c.holdout is not None
             ]
             L.append("")
+        if self.unphysical:
+            L.append("## A lobe no material has\n")
+            for u in self.unphysical:
+                held = (
+                    "" if u["gap_bounded"] is None else f"; held within α ≤ 1, ρs ≤ 1 its gap is {u['gap_bounded']:.4g}"
+                )
+                L.append(
+                    f"- before step {u['step'] + 1}: {u['why']} (gap {u['gap']:.4g}{held}); the radial effects "
+                    "were tried first."
+                )
+            L.append("")
+        if self.not_identifiable:
+            L.append("## Not identifiable from these data (not tried)\n")
+            L += [f"- {n}: {w}." for n, w in self.not_identifiable.items()]
+            L.append("")
+        if self.where is not None:
+            L.append("## Where the residual lives\n")
+            L.append(f"{where_text(self.where, self.n_photos)}.\n")
+            L.append("| region (radius over the largest) | share of χ² | share of observations |\n|---|---|---|")
+            L += [
+                f"| {b['band']} | {100 * b['chi2_share']:.0f} % | {100 * b['obs_share']:.0f} % |"
+                for b in self.where["bands"]
+            ]
+            L.append("\n![χ² per observation of each block](residual.png)\n")
         L.append("## Lobes and the pixels that carry them\n")
         L.append("| label | ρs | α | blocks |\n|---|---|---|---|")
         for lb in self.lobes:
@@ -238,21 +302,51 @@ class PhotoDiscoveryReport:
         return self.to_markdown()
 
     def save(self, out_dir, *, extra: dict | None = None) -> dict[str, Path]:
-        """Write ``report.json``, ``report.md``, ``gap.png``, ``labels.png`` and ``labels.npy`` (atomic writes)."""
+        """Write ``report.json``, ``report.md`` and the figures and label map of the module docstring (atomic)."""
         from .._files import write_image
 
         out = Path(out_dir)
         out.mkdir(parents=True, exist_ok=True)
         fig = gap_figure(self.gap, ["baseline"] + [f"+ {s}" for s in self.found], title=self.name or None)
-        buf = io.BytesIO()
-        fig.savefig(buf, format="png", dpi=110)
-        write_bytes_atomic(out / "gap.png", buf.getvalue())
+        write_bytes_atomic(out / "gap.png", _png(fig))
         lab = self.label_image()
         write_image(out / "labels.png", _PALETTE[lab % len(_PALETTE)])
         buf = io.BytesIO()
         np.save(buf, lab.astype(np.int16))
         write_bytes_atomic(out / "labels.npy", buf.getvalue())
+        if self.where is not None:
+            write_bytes_atomic(out / "residual.png", _png(residual_figure(self.where["chi2_map"], self.grid[2])))
         d = self.to_dict() | (extra or {})
         write_bytes_atomic(out / "report.json", (json.dumps(d, indent=2, ensure_ascii=False) + "\n").encode())
         write_bytes_atomic(out / "report.md", self.to_markdown().encode())
-        return {n: out / n for n in ("report.json", "report.md", "gap.png", "labels.png", "labels.npy")}
+        names = ("report.json", "report.md", "gap.png", "labels.png", "labels.npy")
+        return {n: out / n for n in (*names, *(("residual.png",) if self.where is not None else ()))}
+
+
+def _png(fig) -> bytes:
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=110)
+    return buf.getvalue()
+
+
+def residual_figure(chi2_map: np.ndarray, block: int):
+    """Each block's χ² per observation (1 = the noise), on a log colour scale, axes in pixels."""
+    from matplotlib.colors import LogNorm
+    from matplotlib.figure import Figure
+
+    rows, cols = chi2_map.shape
+    fig = Figure(figsize=(4.8, 4.0 * rows / max(cols, 1) + 0.6), layout="constrained")
+    ax = fig.add_subplot()
+    v = np.clip(chi2_map, 1e-2, None)
+    im = ax.imshow(
+        v,
+        norm=LogNorm(vmin=min(1.0, float(v.min())), vmax=max(10.0, float(v.max()))),
+        extent=(0, cols * block, rows * block, 0),
+        cmap="magma",
+        interpolation="nearest",
+    )
+    ax.set_xlabel("x (pixels fitted)")
+    ax.set_ylabel("y (pixels fitted)")
+    ax.set_title("residual per block", fontsize=9)
+    fig.colorbar(im, ax=ax).set_label("χ² per observation (1 = the noise)")
+    return fig

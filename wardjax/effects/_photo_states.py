@@ -38,6 +38,7 @@ class PhotoState:
 
     radial: tuple[str, ...] = ()
     structural: tuple[str, ...] = ()
+    bounded: bool = False  # the shared lobe held within what a material has (``_photo_model.BOUNDED``)
 
     def plus(self, name: str) -> PhotoState:
         if name in RADIAL:
@@ -87,12 +88,19 @@ def _pixel_fit(data: PhotoData, g: np.ndarray, keep: np.ndarray, lobe: str, norm
 
 
 def fit_state(
-    state: PhotoState, data: PhotoData, keep: np.ndarray | None = None, *, start=None, pixels: bool = False
+    state: PhotoState,
+    data: PhotoData,
+    keep: np.ndarray | None = None,
+    *,
+    start=None,
+    pixels: bool = False,
+    gains_from: SharedFit | None = None,
 ) -> StateFit:
     """Fit ``state`` to the views ``keep (P, V)``; ``pixels``: through :func:`wardjax.fit_pixels` even
-    without structure (to compare with a structural candidate on the same footing)."""
+    without structure (to compare with a structural candidate on the same footing); ``gains_from``: a fit
+    whose radial gains are taken as they are (fitted on a held structure, :mod:`._photo_held`)."""
     keep = np.ones(data.radius2.shape, bool) if keep is None else keep
-    shared = fit_shared(data, state.radial, keep, start)
+    shared = fit_shared(data, state.radial, keep, start, state.bounded) if gains_from is None else gains_from
     if not (state.structural or pixels):
         return StateFit(shared.chi2, shared.dof, shared, None)
     res = _pixel_fit(data, gains(data, shared.effects), keep, state.lobe, state.normals)
