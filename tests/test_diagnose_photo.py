@@ -32,8 +32,8 @@ RADIAL = ("vignetting", "flash_falloff")
 SIZE, F_PX, DIST, LAMP_X, NOISE = 48, 45.0, 200.0, 80.0, 0.002
 
 
-def _flash_capture(folder, *, vignetting=None, falloff=None, seed=0, block=4):
-    """A flash photo of a flat Ward sample (ρd per block), with a hidden radial gain; returns the folder."""
+def _flash_capture(folder, *, vignetting=None, falloff=None, seed=0, block=4, rho_s=0.05, rho_d=(0.5, 0.3, 0.2)):
+    """A flash photo of a flat Ward sample (ρd per block, α 0.15), with a hidden radial gain; returns the folder."""
     folder.mkdir(parents=True)
     rng = np.random.default_rng(seed)
     v, u = np.mgrid[0:SIZE, 0:SIZE].astype(float)
@@ -44,9 +44,9 @@ def _flash_capture(folder, *, vignetting=None, falloff=None, seed=0, block=4):
     wo = (cam - pts) / np.linalg.norm(cam - pts, axis=-1, keepdims=True)
     d2 = np.sum((lamp - pts) ** 2, -1)
     tex = 1.0 + 0.3 * rng.uniform(-1, 1, (SIZE // block, SIZE // block, 1))
-    rho_d = np.array([0.5, 0.3, 0.2]) * np.repeat(np.repeat(tex, block, 0), block, 1)
+    rho_d = np.array(rho_d) * np.repeat(np.repeat(tex, block, 0), block, 1)
     with jax.enable_x64(True):
-        p = wj.WardParams(rho_d=rho_d, rho_s=0.05, alpha_x=0.15, alpha_y=0.15)
+        p = wj.WardParams(rho_d=rho_d, rho_s=rho_s, alpha_x=0.15, alpha_y=0.15)
         f = np.asarray(wj.ward_brdf(p, wi, wo), np.float64)
     shade = f * (wi[..., 2] / d2)[..., None]
     power = 0.5 / float(shade.max())

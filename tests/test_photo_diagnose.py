@@ -1,0 +1,108 @@
+"""``diagnose`` on photographs: a lobe no material has, what one photo cannot tell, where the residual lives.
+
+The flash photos are those of ``test_diagnose_photo`` (wardjax's own Ward
+code, ρd per block, noise of known σ, the lamp 80 mm from the lens):
+
+* a matte sample (ρs = 0) under strong vignetting: the paper's model fits
+  the vignetting with a lobe whose ρs breaks energy conservation; discovery
+  must say so, try the radial effects first, name the vignetting and bring
+  the gap to the noise with a lobe that is no lobe (ρs near 0);
+* one photo: a normal per block is not tried, and the report says why;
+* the radial gains fitted on a held structure (:mod:`wardjax.effects._photo_held`)
+  reproduce the χ² of the fit they hold, and read a Δχ² no larger than a
+  full refit gives (the evidence is conservative);
+* where the residual lives: shares that add up, and with one photo a ρd per
+  pixel absorbing all of it.
+"""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from test_diagnose_photo import _flash_capture
+
+import wardjax as wj
+from wardjax.effects import discover_photo
+from wardjax.effects._photo_checks import residual_where, unphysical
+from wardjax.effects._photo_held import HeldStructure, fit_gains_held
+from wardjax.effects._photo_states import PhotoState, fit_state
+from wardjax.run import photo_data
+
+RADIAL = ("vignetting", "flash_falloff")
+
+
+@pytest.mark.slow  # compiles and runs a whole discovery (about 30 s); test_05 checks the rules fast
+def test_01_a_lobe_no_material_has_is_named_and_the_radial_effect_found(tmp_path):
+    folder = _flash_capture(tmp_path / "matte", vignetting=(-0.8, 0.1), seed=2, rho_s=0.0, rho_d=(0.75, 0.7, 0.6))
+    rep = discover_photo(photo_data(wj.load_capture(folder)), candidates=RADIAL, name="matte")
+    assert rep.baseline["rho_s"] > 1  # the paper's model: the vignetting taken for a broad lobe
+    (u,) = rep.unphysical
+    assert u["step"] == 0 and "exceeds 1 (energy conservation)" in u["why"]
+    assert rep.found == ["vignetting"] and rep.within_noise
+    assert rep.lobes[0]["rho_s"] < 0.05  # the matte sample has no lobe
+    assert rep.verdict().startswith("found vignetting; the gap is within the noise; the paper's model has a lobe")
+    assert "## A lobe no material has" in rep.to_markdown()
+
+
+def test_02_one_photo_does_not_try_normals_and_says_why(tmp_path):
+    data = photo_data(wj.load_capture(_flash_capture(tmp_path / "null")))
+    assert data.n_photos == 1
+    rep = discover_photo(data, candidates=("vignetting", "normals"), name="null")
+    assert rep.found == [] and rep.settings["candidates"] == ["vignetting"]
+    assert list(rep.not_identifiable) == ["normals"] and "one photo" in rep.not_identifiable["normals"]
+    assert rep.verdict() == (
+        "nothing needed: the gap is within the noise; normals not tried "
+        "(one photo: a normal per block and ρd varying inside the block make the same picture)"
+    )
+    paths = rep.save(tmp_path / "out")
+    doc = json.loads(paths["report.json"].read_text())
+    assert doc["not_identifiable"] == rep.not_identifiable and doc["residual"]["map"] == "residual.png"
+    assert paths["residual.png"].is_file() and "## Not identifiable" in paths["report.md"].read_text()
+
+
+@pytest.fixture(scope="module")
+def vignetted(tmp_path_factory):
+    folder = _flash_capture(tmp_path_factory.mktemp("vig") / "cap", vignetting=(-0.3, 0.05))
+    return photo_data(wj.load_capture(folder))
+
+
+@pytest.mark.slow  # two wj.fit_pixels fits, compiled in the worker (about 50 s)
+def test_03_gains_on_a_held_structure_are_conservative(vignetted):
+    data = vignetted
+    cur = fit_state(PhotoState(), data, pixels=True)  # the shared lobe through wj.fit_pixels: a structure to hold
+    held = HeldStructure.of(cur.pixel, data)
+    same = fit_gains_held((), data, held, cur.shared)
+    assert same.chi2 == pytest.approx(cur.chi2, rel=1e-6)  # the held structure is the fit it came from
+    new = fit_gains_held(("vignetting",), data, held, cur.shared)
+    full = fit_state(PhotoState(radial=("vignetting",)), data, pixels=True)
+    assert 0 < same.chi2 - new.chi2 <= (cur.chi2 - full.chi2) * (1 + 1e-6)
+    a1, a2 = new.effects["vignetting"]
+    assert a1 < -0.1 and abs(a2) < 1  # the vignetting's sign read on the held structure
+
+
+def test_04_where_the_residual_lives(vignetted):
+    state = PhotoState()
+    fit = fit_state(state, vignetted)
+    where = residual_where(fit, state, vignetted)
+    assert sum(b["chi2_share"] for b in where["bands"]) == pytest.approx(1)
+    assert sum(b["obs_share"] for b in where["bands"]) == pytest.approx(1)
+    assert where["pixel_rho_d_share"] == pytest.approx(1)  # one photo: each pixel's one value fitted exactly
+    rows, cols, _ = vignetted.grid
+    n = np.sum(vignetted.w > 0, (1, 2)).reshape(rows, cols)
+    assert where["chi2_map"].shape == (rows, cols)
+    assert np.sum(where["chi2_map"] * n) == pytest.approx(fit.chi2, rel=1e-9)
+
+
+def test_05_the_physical_rules_on_a_fitted_lobe(vignetted):
+    state = PhotoState()
+    fit = fit_state(state, vignetted)
+    assert unphysical(fit, state, vignetted) is None  # the renders' lobe: ρs 0.05, α 0.15
+
+    def with_lobe(rho_s, alpha):
+        x = np.array([np.log(alpha)])
+        return fit._replace(shared=fit.shared._replace(rho_s=rho_s, alpha=alpha, x=x))
+
+    assert "exceeds 1 (energy conservation)" in unphysical(with_lobe(1.2, 0.15), state, vignetted)
+    assert unphysical(with_lobe(0.05, 1.5), state, vignetted) == "the lobe: α = 1.5 outside (0.00101, 1]"
