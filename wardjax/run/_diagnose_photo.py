@@ -70,6 +70,6 @@ def diagnose_photo_capture(
 def diagnose_photo_cli(cap: PhotoCapture, out_dir, *, max_steps: int, progress: Callable[[str], object]):
     """``wardjax diagnose`` of a photograph capture: the discovery, its report written into ``out_dir``."""
     rep = diagnose_photo_capture(cap, max_steps=max_steps, progress=progress)
-    progress("writing report.json, report.md, gap.png and the label image")
+    progress("writing report.json, report.md, gap.png, residual.png and the label image")
     rep.save(out_dir)
     return rep
