@@ -237,11 +237,11 @@ def discover_photo(
                 broken.append({"step": len(steps), "why": why, "gap": cur.gap, "gap_bounded": None})
         found = _step(state, cur, remaining, bool(why), data, ln_n, alpha, len(steps) + 1, progress)
         partial += found.partial
-        if found.chosen is None:
+        chosen, new = found.chosen, found.fit
+        if chosen is None or new is None:
             if state.bounded and not steps:  # nothing found on the bounded lobe: the baseline as fitted stands
                 state, cur = PhotoState(), baseline
             break
-        chosen, new = found.chosen, found.fit
         ambiguous += _ambiguous(chosen, found.candidates, data)
         params, sigma = _step_params(chosen.effect, new)
         title = RADIAL[chosen.effect].title if chosen.effect in RADIAL else STRUCTURAL[chosen.effect]
