@@ -20,7 +20,7 @@ import numpy as np
 
 from .._files import write_bytes_atomic
 from ._photo_checks import where_text
-from ._report import Candidate, _num, gap_figure
+from ._report import Candidate, _fmt, _num, gap_figure
 
 if TYPE_CHECKING:
     from ._photo_states import StateFit
@@ -79,9 +79,8 @@ def _where_dict(where: dict) -> dict:
 
 
 def _pm(v, s) -> str:
-    if v is None:
-        return "–"
-    return f"{v:.4g}" if s is None or not math.isfinite(s) else f"{v:.4g} ± {s:.2g}"
+    """``v ± s`` as the scanline report writes it (:func:`._report._fmt`); "–" for no value."""
+    return "–" if v is None else _fmt(float(v), math.nan if s is None else float(s))
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
