@@ -106,3 +106,18 @@ def test_05_the_physical_rules_on_a_fitted_lobe(vignetted):
 
     assert "exceeds 1 (energy conservation)" in unphysical(with_lobe(1.2, 0.15), state, vignetted)
     assert unphysical(with_lobe(0.05, 1.5), state, vignetted) == "the lobe: α = 1.5 outside (0.00101, 1]"
+
+
+@pytest.mark.slow  # a per-cluster fit through wj.fit_pixels, compiled in the worker (about 40 s)
+def test_06_a_radial_step_on_a_model_with_structure_is_scored_held_then_refitted(vignetted):
+    from wardjax.effects._photo_discover import _step
+
+    state = PhotoState(structural=("varying_specular",))
+    cur = fit_state(state, vignetted)
+    lines = []
+    found = _step(state, cur, ["vignetting"], False, vignetted, np.log(vignetted.n_obs), 0.01, 1, lines.append)
+    assert found.chosen is not None and found.chosen.effect == "vignetting" and found.fit is not None
+    assert "step 1: vignetting refitted with the structure" in lines
+    assert found.fit.pixel is not None and found.fit.chi2 < cur.chi2 - found.chosen.delta_chi2 / 2
+    a1, _ = found.fit.shared.effects["vignetting"]
+    assert a1 < -0.1  # the hidden 1 − 0.3 r² + 0.05 r⁴: darker at the edge

@@ -22,6 +22,13 @@ Algorithm (the standard of :func:`wardjax.effects.discover`)
        (normals), alternate views of every problem (photos alternate, a
        block's pixels alternate as a checkerboard). A candidate that fails
        is reported as not predicting, and the next one is tried.
+       Once the model carries structure (lobes per cluster, normals), a
+       radial candidate is scored and held out with that structure held
+       as fitted (:mod:`._photo_held`, halves of alternate views) and only
+       the winner is refitted in full; a step whose model has a lobe no
+       material has (:mod:`._photo_checks`) tries the radial candidates
+       first, on the shared lobe held within ``α ≤ 1``, ``ρs ≤ 1``. With
+       one photo ``normals`` is not tried (not identifiable).
     5. Add it, repeat until no candidate earns its place, ``max_steps``, or
        the gap is within the noise (``χ² − dof ≤ 2 √(2 dof)``, the stop rule
        of :func:`~wardjax.effects.discover`).
@@ -117,9 +124,10 @@ def _score_held(name: str, state: PhotoState, cur: StateFit, held: _Held, data: 
     return _candidate(name, k, held.base.chi2 - new.chi2, cur, new.chi2, ln_n), new  # pyright: ignore[reportAttributeAccessIssue]
 
 
-def _halves(state: PhotoState, data: PhotoData) -> tuple[np.ndarray, np.ndarray] | None:
-    """The hold-out's halves ``(P, V)``: image halves, or alternate views where parameters are per problem."""
-    if state.normals:
+def _halves(state: PhotoState, data: PhotoData, views: bool = False) -> tuple[np.ndarray, np.ndarray] | None:
+    """The hold-out's halves ``(P, V)``: image halves, or alternate views where parameters are per problem
+    (or ``views``: where the structure is held as fitted to every view, so that each half spans the image)."""
+    if state.normals or views:
         a = data.fold == 0
     else:
         a = np.broadcast_to((data.column < 0.5)[:, None], data.fold.shape)
@@ -136,9 +144,11 @@ def holdout(
     """Both models fitted on each half predict the other; ``None`` where the data have no two halves.
 
     With ``held`` (a radial candidate on a model with structure) the structure stays as fitted to all the
-    data and only the gains are fitted on each half (:mod:`._photo_held`).
+    data and only the gains are fitted on each half (:mod:`._photo_held`); the halves are then alternate
+    views, each spanning the image: image halves would ask the gains fitted on one side to make up for
+    the held structure's errors on the other.
     """
-    halves = _halves(new, data)
+    halves = _halves(new, data, views=held is not None)
     if halves is None:
         return None
     gain = 0.0
