@@ -157,7 +157,7 @@ def _gram(cols: list[jax.Array], st: _Stats) -> jax.Array:
     The columns ``(P, K)`` are the same in every channel, so their products need the channel sums
     ``Σ_c w`` and ``Σ_c w f`` only; the projection needs ``⟨q, x⟩`` per channel.
     """
-    xq = [jnp.einsum("pkc,pk->pc", st.qw, x) for x in cols]
+    xq = [jnp.sum(st.qw * x[..., None], 1) for x in cols]
     m = len(cols) + 1
     entries: dict[tuple[int, int], jax.Array] = {(0, 0): st.ff}
     for i, x in enumerate(cols, 1):
@@ -264,10 +264,12 @@ def lobe_covariance(theta, s, labels, geom, f, w, *, n_lobes: int):
     q = geom.q
     sq = jnp.sum(w * (q * q)[..., None], 1)  # (P, C)
     inv = jnp.where(sq > 0, 1.0 / jnp.where(sq > 0, sq, 1.0), 0.0)
-    dq = jnp.stack([jnp.sum(w * (q * x)[..., None], 1) for x in cols], -1)  # (P, C, m) ⟨q, D⟩
-    dd = jnp.stack([jnp.stack([jnp.sum(w * (x * y)[..., None], 1) for y in cols], -1) for x in cols], -2)
-    proj = dd - dq[..., :, None] * dq[..., None, :] * inv[..., None, None]  # (P, C, m, m)
-    info = jax.ops.segment_sum(jnp.sum(proj, 1), labels, num_segments=n_lobes)  # (L, m, m)
+    qw = w * q[..., None]
+    dq = jnp.stack([jnp.sum(qw * x[..., None], 1) for x in cols], -1)  # (P, C, m) ⟨q, D⟩
+    wsum = jnp.sum(w, -1)  # D is the same in every channel: Σ_c ⟨D_i, D_j⟩ needs Σ_c w only
+    dd = jnp.stack([jnp.stack([jnp.sum(wsum * x * y, 1) for y in cols], -1) for x in cols], -2)  # (P, m, m)
+    proj = dd - jnp.sum(dq[..., :, None] * dq[..., None, :] * inv[..., None, None], 1)  # (P, m, m)
+    info = jax.ops.segment_sum(proj, labels, num_segments=n_lobes)  # (L, m, m)
     cov = jnp.linalg.inv(info)  # an empty lobe gives NaN, reported as such
     g = -dq * inv[..., None]  # (P, C, m)
     var_a = inv + jnp.einsum("pci,pij,pcj->pc", g, cov[labels], g)
