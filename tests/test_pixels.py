@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 import wardjax as wj
+from wardjax.fit import _pixel_sample
 from wardjax.render import flash_views, radiance_render_flash_views, render_flash_views
 from wardjax.simulate import flash_views_data
 
@@ -44,10 +45,20 @@ def test_shared_lobe_and_rho_d_recovered_with_calibrated_sigma():
     np.testing.assert_allclose(pred, clean.clean[:, :1], rtol=1e-6, atol=1e-9)
 
 
-def test_clusters_two_materials_and_none_where_one():
+def test_clusters_two_materials_and_none_where_one(monkeypatch):
     scene = flash_views((16, 16), bump_amplitude=0.0)
     data = flash_views_data(scene, seed=2)
     res = wj.fit_pixels(data.f_r, data.wi, data.wo, weights=data.sigma**-2, lobe="clusters", normalization=NORM)
+    # Searched for on a sample of the pixels and refined on all, the lobes and labels are those of the
+    # search on all pixels: the same optimum of the same χ², to a small fraction of each lobe's σ.
+    monkeypatch.setattr(_pixel_sample, "LOBE_SAMPLE", 96)
+    part = wj.fit_pixels(data.f_r, data.wi, data.wo, weights=data.sigma**-2, lobe="clusters", normalization=NORM)
+    assert part.evidence["clusters"]["sample_pixels"] == 96 and part.n_lobes == res.n_lobes == 2
+    assert np.mean(part.labels == res.labels) > 0.99 or np.mean(part.labels != res.labels) > 0.99
+    i, j = np.argsort(part.alpha_x), np.argsort(res.alpha_x)  # the lobes in the same order
+    for name in ("rho_s", "alpha_x"):
+        est, ref, sd = getattr(part, name)[i], getattr(res, name)[j], getattr(res.stderr, name)[j]
+        assert np.all(np.abs(est - ref) < 0.1 * sd), (name, est, ref, sd)
     assert res.evidence["clusters"]["n_clusters"] == 2
     order = np.argsort(res.alpha_x)
     np.testing.assert_allclose(res.rho_s[order], scene.rho_s, rtol=0.05)

@@ -127,27 +127,53 @@ def _derivatives(geom: PixelGeometry, theta: jax.Array, b: jax.Array) -> list[ja
     return [b * (2.0 * geom.u * ex - 1.0), b * (2.0 * geom.v * ey - 1.0)]
 
 
-def _gram(cols: list[jax.Array], q: jax.Array, w: jax.Array) -> jax.Array:
-    """``(P, m, m)``: ``Σ_c ⟨x̃_i, x̃_j⟩`` of the columns (``(P, K)`` or ``(P, K, C)`` each), projected per pixel."""
-    cols = [x if x.ndim == 3 else x[..., None] for x in cols]
+class _Stats(NamedTuple):
+    """What the Gram matrices need of the data, whatever the lobe: per pixel ``(P, K)`` or ``(P, C)``.
+
+    ``qw = w q (P, K, C)``; ``wsum = Σ_c w``, ``fsum = Σ_c w f`` ``(P, K)``; ``inv = 1/⟨q, q⟩`` and
+    ``fq = ⟨q, f⟩`` ``(P, C)``; ``ff = Σ_c ⟨f̃, f̃⟩ (P,)``.
+    """
+
+    qw: jax.Array
+    wsum: jax.Array
+    fsum: jax.Array
+    inv: jax.Array
+    fq: jax.Array
+    ff: jax.Array
+
+
+def _stats(q: jax.Array, f: jax.Array, w: jax.Array) -> _Stats:
     qw = w * q[..., None]
     sq = jnp.sum(qw * q[..., None], 1)
     inv = jnp.where(sq > 0, 1.0 / jnp.where(sq > 0, sq, 1.0), 0.0)
-    xq = [jnp.sum(qw * x, 1) for x in cols]
-    m = len(cols)
-    entries: dict[tuple[int, int], jax.Array] = {}
-    for i in range(m):
+    fq = jnp.sum(qw * f, 1)
+    ff = jnp.sum(jnp.sum(w * f * f, 1) - fq * fq * inv, -1)
+    return _Stats(qw, jnp.sum(w, -1), jnp.sum(w * f, -1), inv, fq, ff)
+
+
+def _gram(cols: list[jax.Array], st: _Stats) -> jax.Array:
+    """``(P, m+1, m+1)``: ``Σ_c ⟨x̃_i, x̃_j⟩`` of ``(f, cols…)``, projected per pixel and channel.
+
+    The columns ``(P, K)`` are the same in every channel, so their products need the channel sums
+    ``Σ_c w`` and ``Σ_c w f`` only; the projection needs ``⟨q, x⟩`` per channel.
+    """
+    xq = [jnp.sum(st.qw * x[..., None], 1) for x in cols]
+    m = len(cols) + 1
+    entries: dict[tuple[int, int], jax.Array] = {(0, 0): st.ff}
+    for i, x in enumerate(cols, 1):
+        entries[0, i] = entries[i, 0] = jnp.sum(st.fsum * x, 1) - jnp.sum(st.fq * xq[i - 1] * st.inv, -1)
         for j in range(i, m):
-            entries[i, j] = entries[j, i] = jnp.sum(jnp.sum(w * cols[i] * cols[j], 1) - xq[i] * xq[j] * inv, -1)
+            y = cols[j - 1]
+            entries[i, j] = entries[j, i] = jnp.sum(st.wsum * x * y, 1) - jnp.sum(xq[i - 1] * xq[j - 1] * st.inv, -1)
     return jnp.stack([jnp.stack([entries[i, j] for j in range(m)], -1) for i in range(m)], -2)
 
 
-def _lobe_gram(theta, labels, geom, f, w, n_lobes, derivatives=True):
+def _lobe_gram(theta, labels, geom, st, n_lobes, derivatives=True):
     """Per lobe ``(L, m, m)`` Gram matrix of ``(f, B, ∂B/∂θ…)``, summed over its pixels."""
     theta_p = theta[labels]
     b = basis(geom, theta_p)
-    cols = [f, b] + (_derivatives(geom, theta_p, b) if derivatives else [])
-    return jax.ops.segment_sum(_gram(cols, geom.q, w), labels, num_segments=n_lobes)
+    cols = [b] + (_derivatives(geom, theta_p, b) if derivatives else [])
+    return jax.ops.segment_sum(_gram(cols, st), labels, num_segments=n_lobes)
 
 
 def _profile(gram):
@@ -159,12 +185,12 @@ def _profile(gram):
 
 def lobe_profile(theta, labels, geom, f, w, n_lobes: int):
     """Per lobe ``(χ²_l, s_l)``, each ``(L,)``, at ``theta (L, d)`` (ρd and ρs profiled out)."""
-    return _profile(_lobe_gram(theta, labels, geom, f, w, n_lobes, derivatives=False))
+    return _profile(_lobe_gram(theta, labels, geom, _stats(geom.q, f, w), n_lobes, derivatives=False))
 
 
 def pixel_chi2(theta, s, labels, geom, f, w):
     """``(P,)`` each pixel's χ² under its lobe ``(θ, s)[labels]``, its ρd profiled."""
-    gram = _gram([f, basis(geom, theta[labels])], geom.q, w)
+    gram = _gram([basis(geom, theta[labels])], _stats(geom.q, f, w))
     s_p = s[labels]
     return gram[:, 0, 0] - s_p * (2.0 * gram[:, 1, 0] - s_p * gram[:, 1, 1])
 
@@ -174,7 +200,8 @@ def lobe_grid(labels, geom, f, w, *, n_lobes: int):
     """``(L,)`` a starting ``log α`` per lobe: the best of :data:`_GRID` and the vertex of its parabola."""
     ts = jnp.asarray(_GRID, f.dtype)
     ones = jnp.ones((n_lobes, 1), f.dtype)
-    c = jax.lax.map(lambda t: lobe_profile(t * ones, labels, geom, f, w, n_lobes)[0], ts)  # (G, L)
+    st = _stats(geom.q, f, w)
+    c = jax.lax.map(lambda t: _profile(_lobe_gram(t * ones, labels, geom, st, n_lobes, derivatives=False))[0], ts)
     i = jnp.clip(jnp.argmin(c, 0), 1, len(_GRID) - 2)
     c0, c1, c2 = (jnp.take_along_axis(c, (i + o)[None], 0)[0] for o in (-1, 0, 1))
     h = ts[1] - ts[0]
@@ -197,8 +224,10 @@ def lobe_fit(theta0, labels, geom, f, w, *, n_lobes: int, steps: int = 8):
     d = theta0.shape[-1]
     eye = jnp.eye(d, dtype=theta0.dtype)
 
+    st = _stats(geom.q, f, w)
+
     def gram_of(theta):
-        return _lobe_gram(theta, labels, geom, f, w, n_lobes)
+        return _lobe_gram(theta, labels, geom, st, n_lobes)
 
     def step(_, state):
         theta, gram, lam = state
@@ -235,10 +264,12 @@ def lobe_covariance(theta, s, labels, geom, f, w, *, n_lobes: int):
     q = geom.q
     sq = jnp.sum(w * (q * q)[..., None], 1)  # (P, C)
     inv = jnp.where(sq > 0, 1.0 / jnp.where(sq > 0, sq, 1.0), 0.0)
-    dq = jnp.stack([jnp.sum(w * (q * x)[..., None], 1) for x in cols], -1)  # (P, C, m) ⟨q, D⟩
-    dd = jnp.stack([jnp.stack([jnp.sum(w * (x * y)[..., None], 1) for y in cols], -1) for x in cols], -2)
-    proj = dd - dq[..., :, None] * dq[..., None, :] * inv[..., None, None]  # (P, C, m, m)
-    info = jax.ops.segment_sum(jnp.sum(proj, 1), labels, num_segments=n_lobes)  # (L, m, m)
+    qw = w * q[..., None]
+    dq = jnp.stack([jnp.sum(qw * x[..., None], 1) for x in cols], -1)  # (P, C, m) ⟨q, D⟩
+    wsum = jnp.sum(w, -1)  # D is the same in every channel: Σ_c ⟨D_i, D_j⟩ needs Σ_c w only
+    dd = jnp.stack([jnp.stack([jnp.sum(wsum * x * y, 1) for y in cols], -1) for x in cols], -2)  # (P, m, m)
+    proj = dd - jnp.sum(dq[..., :, None] * dq[..., None, :] * inv[..., None, None], 1)  # (P, m, m)
+    info = jax.ops.segment_sum(proj, labels, num_segments=n_lobes)  # (L, m, m)
     cov = jnp.linalg.inv(info)  # an empty lobe gives NaN, reported as such
     g = -dq * inv[..., None]  # (P, C, m)
     var_a = inv + jnp.einsum("pci,pij,pcj->pc", g, cov[labels], g)
@@ -250,10 +281,12 @@ def lobe_covariance(theta, s, labels, geom, f, w, *, n_lobes: int):
 def assign_costs(theta, s, geom, f, w, *, n_lobes: int):
     """``(P, L)``: each pixel's χ² under each lobe ``(θ_l, s_l)``, its ρd profiled."""
 
+    st = _stats(geom.q, f, w)
+
     def one(ts):
         t, s_l = ts
         tp = jnp.broadcast_to(t, (f.shape[0], t.shape[-1]))
-        gram = _gram([f, basis(geom, tp)], geom.q, w)
+        gram = _gram([basis(geom, tp)], st)
         return gram[:, 0, 0] - s_l * (2.0 * gram[:, 1, 0] - s_l * gram[:, 1, 1])
 
     return jax.lax.map(one, (theta, s)).T

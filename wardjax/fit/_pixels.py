@@ -6,30 +6,38 @@ and fits, in one batched float64 call, the model of :mod:`._pixel_model`:
 that is
 
 * ``"shared"`` by every pixel (the image-based paper's model, the default);
-* one per material ``"clusters"``: the lobes of per-pixel fits on a sample of
-  pixels are clustered (k-means in ``(log ρs, log α)``), each cluster's lobe is
-  refitted on all pixels, and every pixel is assigned to the lobe under which
-  its own χ² (ρd profiled) is lowest, weighted by the cluster's share — hard
-  EM on the mixture, four rounds. The count ``k`` is the one of lowest BIC of
-  the mixture, ``−2 Σ_p log Σ_l π_l e^{−χ²_pl/2} + (k(1+d) + k − 1) ln n``,
-  ``n`` the number of observations, unless ``n_clusters`` fixes it; a count
-  whose clusters hold under 2 % of the pixels, or whose lobe no material has
-  (ρs > 1, α at its bound), is not considered;
+* one per material ``"clusters"`` (:mod:`._pixel_clusters`): the physical lobes
+  of per-pixel fits on a sample of pixels are clustered (k-means in
+  ``(log ρs, log α)``), each cluster's lobe is refitted on the pixels, and every
+  pixel is assigned to the lobe under which its own χ² (ρd profiled) is lowest,
+  weighted by the cluster's share — hard EM on the mixture, four rounds. The
+  count ``k`` is the one of lowest BIC of the mixture,
+  ``−2 Σ_p log Σ_l π_l e^{−χ²_pl/2} + (k(1+d) + k − 1) ln n``, ``n`` the number
+  of observations, unless ``n_clusters`` fixes it; a count whose clusters hold
+  under 2 % of the pixels, or whose lobe no material has (ρs > 1, α at its
+  bound), is not considered;
 * ``"pixel"``: every pixel's own lobe where its photos see the highlight — a
   pixel keeps its lobe where :func:`~wardjax.fit_scanlines` certifies it
   (lobe detected at 5σ, α resolved) and it lowers the pixel's χ² by more than
   its BIC cost ``(1+d) ln n``; the others carry the shared lobe (label 0).
 
+Above :data:`._pixel_sample.LOBE_SAMPLE` pixels the lobes (and the cluster
+count) are searched for on a random sample of the pixels and then refined on
+all of them (:mod:`._pixel_sample`).
+
 ``normals=True`` adds a normal per pixel (:mod:`._pixel_normals`); a pixel
 keeps its normal where it lowers its χ² by more than ``2 ln n`` (BIC), else it
-stays flat. With clusters each pixel's normal is fitted under every lobe and
-the pixel takes the (lobe, normal) of lowest cost; then the lobes and the
+stays flat, its normal's σ then the spread of the normals the other pixels
+keep. With clusters each pixel's normal is fitted under every lobe and the
+pixel takes the (lobe, normal) of lowest cost; then the lobes and the
 normals are refined together (:mod:`._pixel_joint`: Gauss–Newton on the lobes
 with each pixel's ρd and slopes eliminated), and the two alternate. Refitting
 the lobes with the normals held fixed instead stops short of the optimum: a
 tilt and a lobe width trade off. Last, lobes are dropped while that lowers the
-BIC with each pixel's normal refitted under its new lobe (the count chosen
-again with normals in the model).
+BIC of the classification likelihood (each pixel pays ``−2 log π`` of its
+lobe's share) with each pixel's normal refitted under its new lobe, and a lobe
+fewer than 2 % of the pixels take is dropped (the count chosen again with
+normals in the model).
 
 Standard errors are Gauss–Newton (the curvature of χ²); with ``weights``
 (``1/σ²``) they are taken as given, without them every variance is scaled by
@@ -40,6 +48,7 @@ Standard errors are Gauss–Newton (the curvature of χ²); with ``weights``
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 from typing import NamedTuple
 
@@ -51,20 +60,18 @@ from jaxtyping import Array, ArrayLike, Float
 from ..ward import NORMALIZATIONS
 from . import _pixel_model as pm
 from ._data import check_choice
+from ._pixel_clusters import STEPS, choose_clusters, for_scanlines, min_cluster_size
 from ._pixel_joint import reduced_system
 from ._pixel_normals import fit_normals, normal_from_slopes, normal_jacobian
+from ._pixel_sample import POLISH, pixel_sample, spread, take
 from ._scanline import fit_scanlines
 
 __all__ = ["PixelFit", "PixelParams", "fit_pixels", "predict_pixels"]
 
 LOBES = ("shared", "clusters", "pixel")
 MODELS = ("isotropic", "anisotropic")
-MAX_CLUSTERS = 4  # the largest count tried when the data choose it
-_SUBSAMPLE = 4096  # pixels fitted alone to seed the clusters
-_EM_ROUNDS = 4
 _NORMAL_ROUNDS = 2  # alternations of (labels, normals) with the lobes
 _JOINT_STEPS = 4  # Gauss–Newton steps on lobes and normals together
-_STEPS = 8  # Levenberg–Marquardt steps per lobe fit (one compiled program for every call)
 
 
 class PixelParams(NamedTuple):
@@ -196,79 +203,14 @@ _geometry = jax.jit(pm.geometry, static_argnames="normalization")
 _pixel_chi2 = jax.jit(pm.pixel_chi2)
 
 
-def _for_scanlines(f, w):
-    """The 3-channel arrays :func:`fit_scanlines` takes (a grey channel repeated, its weight shared)."""
-    if f.shape[-1] == 3:
-        return f, w
-    grey = np.sum(w * f, -1, keepdims=True) / np.maximum(np.sum(w, -1, keepdims=True), 1e-300)
-    return np.repeat(grey, 3, -1), np.repeat(np.sum(w, -1, keepdims=True) / 3.0, 3, -1)
-
-
-def _clusters(data, geom, shared, d, n_clusters, seed, normalization, ln_n):
-    """Choose the count and fit a lobe per cluster; returns ``(theta, s, labels, evidence)``.
-
-    Every count is fitted with :data:`MAX_CLUSTERS` lobe slots (unused ones
-    parked with no pixels) so that one compiled program serves them all.
-    """
-    from scipy.cluster.vq import kmeans2
-
-    f, w, wi, wo = data
-    p = f.shape[0]
-    rng = np.random.default_rng(seed)
-    sub = np.sort(rng.choice(p, size=min(p, _SUBSAMPLE), replace=False))
-    fs, ws = _for_scanlines(np.asarray(f[sub]), np.asarray(w[sub]))
-    one = fit_scanlines(
-        fs,
-        np.asarray(wi[sub]),
-        np.asarray(wo[sub]),
-        weights=ws,
-        mask=np.all(ws > 0, -1),
-        normalization=normalization,
-        errors="gauss_newton",
+@functools.partial(jax.jit, static_argnames="n_lobes")
+def _outputs(theta, s, labels, geom, f, w, *, n_lobes: int):
+    """ρd, the covariances and each pixel's χ² in one compiled pass (the lobe basis computed once)."""
+    return (
+        _diffuse(theta, s, labels, geom, f, w),
+        pm.lobe_covariance(theta, s, labels, geom, f, w, n_lobes=n_lobes),
+        pm.pixel_chi2(theta, s, labels, geom, f, w),
     )
-    good = one.ok & (one.params.rho_s > 0)
-    feats = np.stack([np.log(one.params.rho_s[good]), np.log(one.params.alpha_x[good])], -1)
-    theta1, s1, chi2_1 = shared
-    slots = max(MAX_CLUSTERS, n_clusters or 0)
-    counts = [n_clusters] if n_clusters else list(range(1, MAX_CLUSTERS + 1))
-    min_size = max(10, p // 50)  # a cluster must hold 2 % of the pixels
-    bic: dict[int, float] = {}
-    best = None
-    for k in counts:
-        if k == 1:
-            cand = (theta1, s1, jnp.zeros(p, jnp.int32))
-            loglike = -0.5 * float(jnp.sum(chi2_1))
-        else:
-            if feats.shape[0] < 5 * k:
-                break
-            centres, _ = kmeans2(feats, k, rng=np.random.default_rng(seed), minit="++")
-            theta = np.full((slots, d), math.log(0.1))
-            theta[:k] = centres[:, 1:2]
-            s = np.zeros(slots)
-            s[:k] = np.exp(centres[:, 0])
-            theta, s = jnp.asarray(theta), jnp.asarray(s)
-            log_pi = jnp.asarray(np.where(np.arange(slots) < k, -math.log(k), -np.inf))
-            for _ in range(_EM_ROUNDS):
-                labels = jnp.argmin(pm.assign_costs(theta, s, geom, f, w, n_lobes=slots) - 2.0 * log_pi[None], 1)
-                labels = labels.astype(jnp.int32)
-                theta, s, _ = pm.lobe_fit(theta, labels, geom, f, w, n_lobes=slots, steps=_STEPS)
-                share = np.bincount(np.asarray(labels), minlength=slots) / p
-                log_pi = jnp.asarray(np.where(share > 0, np.log(np.maximum(share, 1e-300)), -np.inf))
-            costs = pm.assign_costs(theta, s, geom, f, w, n_lobes=slots)
-            labels = jnp.argmin(costs - 2.0 * log_pi[None], 1).astype(jnp.int32)
-            sizes = np.bincount(np.asarray(labels), minlength=slots)[:k]
-            s_k, a_k = np.asarray(s[:k]), np.exp(np.asarray(theta[:k]))
-            if np.any(sizes < min_size) or np.any(s_k > 1.0) or np.any(a_k <= 1.01 * math.exp(pm.LOG_ALPHA_MIN)):
-                continue  # a cluster the data do not support, or a lobe no material has (ρs > 1, α at its bound)
-            loglike = float(jnp.sum(jax.scipy.special.logsumexp(log_pi[None] - 0.5 * costs, axis=1)))
-            cand = (theta[:k], s[:k], labels)
-        bic[k] = -2.0 * loglike + (k * (1 + d) + k - 1) * ln_n
-        if best is None or bic[k] < bic[best[0]]:
-            best = (k, cand)
-    if best is None:
-        best = (1, (theta1, s1, jnp.zeros(p, jnp.int32)))
-    k, (theta, s, labels) = best
-    return theta, s, labels, {"bic": bic, "n_clusters": k}
 
 
 def _labels_with_normals(theta, s, labels, data, t, normalization, ln_n, g0=None):
@@ -352,8 +294,10 @@ def _prune_lobes(theta, s, labels, normal_map, data, t, normalization, ln_n):
     Clusters are chosen on normals fitted under one shared lobe, which leave some lobe variation
     unexplained; once each pixel's normal is fitted under its own lobe, a cluster may stand for
     nothing. Each round fits every pixel's normal under every lobe (from its current slopes), and
-    removes the lobe whose pixels, moved to the best other lobe, lower ``χ² + (k(1+d) + k − 1) ln n``
-    the most; until none does.
+    removes a lobe that fewer than 2 % of the pixels take (:func:`._pixel_clusters.min_cluster_size`),
+    else the lobe whose pixels, moved to the best other lobe, lower the BIC of the classification
+    likelihood ``Σ_p (χ²_{p l(p)} − 2 log π_{l(p)}) + (k(1+d) + k − 1) ln n`` the most (``π`` the
+    shares: a rare lobe costs every pixel that takes it); until none does.
     """
     f, w, wi, wo = data
     p, d = f.shape[0], int(theta.shape[1])
@@ -378,15 +322,20 @@ def _prune_lobes(theta, s, labels, normal_map, data, t, normalization, ln_n):
         ]
         cost = np.asarray(jnp.stack([jnp.minimum(fl[2], fl[3]) for fl in fits], 1))
 
-        def bic(cols):
-            m = len(cols)
-            return float(np.sum(np.min(cost[:, cols], 1))) + (m * (1 + d) + m - 1) * ln_n
+        def bic(cols):  # the classification likelihood: each pixel pays −2 log π of the lobe it takes
+            m, sub = len(cols), cost[:, cols]
+            log_pi = np.log(np.maximum(np.bincount(np.argmin(sub, 1), minlength=m) / p, 1e-300))
+            return float(np.sum(np.min(sub - 2.0 * log_pi, 1))) + (m * (1 + d) + m - 1) * ln_n
 
-        now = bic(list(range(k)))
-        drops = [bic([j for j in range(k) if j != i]) for i in range(k)]
-        i = int(np.argmin(drops))
-        if drops[i] >= now:
-            break
+        sizes = np.bincount(np.argmin(cost, 1), minlength=k)
+        if np.min(sizes) < min_cluster_size(p):  # a cluster the data do not support, as in choose_clusters
+            i = int(np.argmin(sizes))
+        else:
+            now = bic(list(range(k)))
+            drops = [bic([j for j in range(k) if j != i]) for i in range(k)]
+            i = int(np.argmin(drops))
+            if drops[i] >= now:
+                break
         rest = [j for j in range(k) if j != i]
         new = np.asarray(rest)[np.argmin(cost[:, rest], 1)]
         labels = jnp.asarray(np.searchsorted(rest, new).astype(np.int32))
@@ -412,6 +361,17 @@ def _clusters_with_normals(theta, s, labels, data, t, normalization, ln_n):
     return theta, s, labels, normal_map, keep, cov_ag
 
 
+def _flat_slopes_var(normal_map, keep):
+    """``(2, 2)`` the slopes' variance of a pixel left flat: the spread of the slopes the other pixels keep.
+
+    A pixel stays flat where its photos do not tell its normal (no highlight seen); its normal is then
+    known only as well as the sample's normals vary, not to zero.
+    """
+    g = _slopes(normal_map)
+    n = jnp.maximum(jnp.sum(keep), 1)
+    return jnp.diag(jnp.sum(jnp.where(keep[:, None], g * g, 0.0), 0) / n)
+
+
 def _lobe_covariance_with_normals(a, theta, s, labels, normal_map, data, t, normalization):
     """``(L, 1+d, 1+d)`` the lobes' covariance in ``(ρs, θ)`` with every pixel's ``(ρd, slopes)`` free."""
     f, w, wi, wo = data
@@ -421,13 +381,35 @@ def _lobe_covariance_with_normals(a, theta, s, labels, normal_map, data, t, norm
     return jnp.linalg.inv(info)
 
 
+def _clusters_on_sample(sub, data, geom, shared, d, n_clusters, seed, normalization):
+    """:func:`._pixel_clusters.choose_clusters` on the sample ``sub`` of the pixels (all where ``None``),
+    the lobes then carried to every pixel (:func:`._pixel_sample.spread`); returns ``theta``, ``s``,
+    ``labels``, the evidence (the BIC is the sample's, with its own ``n``)."""
+    theta, s = shared
+    geom_s, *data_s = take(sub, geom, *data)
+    f_s, w_s = data_s[0], data_s[1]
+    labels_s = jnp.zeros(f_s.shape[0], jnp.int32)
+    chi2_s = pm.lobe_profile(theta, labels_s, geom_s, f_s, w_s, 1)[0]
+    ln_s = math.log(max(int(jnp.sum(w_s > 0)), 2))
+    theta, s, labels_s, ev = choose_clusters(
+        tuple(data_s), geom_s, (theta, s, chi2_s), d, n_clusters, seed, normalization, ln_s
+    )
+    if sub is None:
+        return theta, s, labels_s, ev
+    ev["sample_pixels"] = int(sub.size)
+    if int(theta.shape[0]) == 1:
+        return theta, s, jnp.zeros(data[0].shape[0], jnp.int32), ev
+    theta, s, labels = spread(theta, s, labels_s, geom, data[0], data[1])
+    return theta, s, labels, ev
+
+
 def _pixel_lobes(data, geom, shared, model, normalization, ln_n, d):
     """Per-pixel lobes where certified and worth their BIC; label 0 is the shared lobe."""
     f, w, wi, wo = data
     theta1, s1, _ = shared
     labels0 = jnp.zeros(f.shape[0], jnp.int32)
     c_shared = np.asarray(_pixel_chi2(theta1, s1, labels0, geom, f, w))
-    fs, ws = _for_scanlines(np.asarray(f), np.asarray(w))
+    fs, ws = for_scanlines(np.asarray(f), np.asarray(w))
     one = fit_scanlines(
         fs, np.asarray(wi), np.asarray(wo), model, weights=ws, mask=np.all(ws > 0, -1), normalization=normalization
     )
@@ -523,8 +505,13 @@ def _fit(f, wi, wo, w, t, lobe, model, n_clusters, normals, normalization, seed,
     flat = jnp.broadcast_to(jnp.asarray([0.0, 0.0, 1.0]), (p, 3))
     geom = _geometry(wi, wo, flat, t, normalization)
     labels = jnp.zeros(p, jnp.int32)
-    start = jnp.broadcast_to(pm.lobe_grid(labels, geom, f, w, n_lobes=1)[:, None], (1, d))
-    shared = pm.lobe_fit(start, labels, geom, f, w, n_lobes=1, steps=_STEPS)
+    sub = pixel_sample(p, seed)  # the lobes are searched for on a sample, then refined on all (._pixel_sample)
+    geom_s, f_s, w_s = take(sub, geom, f, w)
+    labels_s = jnp.zeros(f_s.shape[0], jnp.int32)
+    start = jnp.broadcast_to(pm.lobe_grid(labels_s, geom_s, f_s, w_s, n_lobes=1)[:, None], (1, d))
+    shared = pm.lobe_fit(start, labels_s, geom_s, f_s, w_s, n_lobes=1, steps=STEPS)
+    if sub is not None:
+        shared = pm.lobe_fit(shared[0], labels, geom, f, w, n_lobes=1, steps=POLISH)
     theta, s, chi2_l = shared
     evidence: dict = {"chi2_shared": float(jnp.sum(chi2_l))}
     data = (f, w, wi, wo)
@@ -538,20 +525,22 @@ def _fit(f, wi, wo, w, t, lobe, model, n_clusters, normals, normalization, seed,
         kept = (c_flat - c_fit) > 2.0 * ln_n
         n_map = normal_from_slopes(jnp.where(kept[:, None], g, 0.0))
         geom = _geometry(wi, wo, n_map, t, normalization)
-        theta, s, _ = pm.lobe_fit(theta, labels, geom, f, w, n_lobes=int(theta.shape[0]), steps=_STEPS)
+        theta, s, _ = pm.lobe_fit(theta, labels, geom, f, w, n_lobes=int(theta.shape[0]), steps=STEPS)
         return theta, s, geom, n_map, kept, cov
 
     if normals and lobe != "pixel":  # normals under the shared lobe first: the clusters then see bump-free data
         theta, s, geom, normal_map, keep, cov_ag = with_normals(theta, s, labels, geom)
         shared = (theta, s, pm.lobe_profile(theta, labels, geom, f, w, 1)[0])
     if lobe == "clusters":
-        theta, s, labels, evidence["clusters"] = _clusters(data, geom, shared, d, n_clusters, seed, normalization, ln_n)
+        theta, s, labels, evidence["clusters"] = _clusters_on_sample(
+            sub, data, geom, (theta, s), d, n_clusters, seed, normalization
+        )
     elif lobe == "pixel":
         theta, s, labels, evidence["pixel"] = _pixel_lobes(data, geom, shared, model, normalization, ln_n, d)
     n_lobes = int(theta.shape[0])
     if normals:
         flat = _geometry(wi, wo, jnp.broadcast_to(jnp.asarray([0.0, 0.0, 1.0]), (p, 3)), t, normalization)
-        theta_flat, s_flat, _ = pm.lobe_fit(theta, labels, flat, f, w, n_lobes=n_lobes, steps=_STEPS)
+        theta_flat, s_flat, _ = pm.lobe_fit(theta, labels, flat, f, w, n_lobes=n_lobes, steps=STEPS)
         before = float(jnp.sum(_pixel_chi2(theta_flat, s_flat, labels, flat, f, w)))
         if lobe == "clusters" and n_lobes > 1:
             theta, s, labels, normal_map, keep, cov_ag = _clusters_with_normals(
@@ -574,13 +563,11 @@ def _fit(f, wi, wo, w, t, lobe, model, n_clusters, normals, normalization, seed,
             "delta_bic": before - after - 2 * n_keep * ln_n,
         }
 
-    a, inv_sq = _diffuse(theta, s, labels, geom, f, w)
-    cov_lobe, var_a = pm.lobe_covariance(theta, s, labels, geom, f, w, n_lobes=n_lobes)
-    pix_chi2 = _pixel_chi2(theta, s, labels, geom, f, w)
+    (a, inv_sq), (cov_lobe, var_a), pix_chi2 = _outputs(theta, s, labels, geom, f, w, n_lobes=n_lobes)
     slopes_var = None
     if normals and cov_ag is not None:
         var_a = jnp.where(keep[:, None], var_a - inv_sq + jnp.diagonal(cov_ag, axis1=1, axis2=2)[:, :c], var_a)
-        slopes_var = jnp.where(keep[:, None, None], cov_ag[:, c:, c:], 0.0)
+        slopes_var = jnp.where(keep[:, None, None], cov_ag[:, c:, c:], _flat_slopes_var(normal_map, keep))
         cov_lobe = _lobe_covariance_with_normals(a, theta, s, labels, normal_map, data, t, normalization)
     chi2 = float(jnp.sum(pix_chi2))
     valid_pixels = int(jnp.sum(jnp.any(w > 0, (1, 2))))
@@ -596,7 +583,8 @@ def _fit(f, wi, wo, w, t, lobe, model, n_clusters, normals, normalization, seed,
     sd_normals = None
     if normal_map is not None and slopes_var is not None:
         jac = normal_jacobian(jnp.asarray(-normal_map[:, :2] / normal_map[:, 2:]))
-        cov_n = jnp.einsum("pij,pjk,plk->pil", jac, slopes_var * scale, jac)
+        cov_g = jnp.where(keep[:, None, None], slopes_var * scale, slopes_var)  # a flat pixel's is the spread
+        cov_n = jnp.einsum("pij,pjk,plk->pil", jac, cov_g, jac)
         sd_normals = np.sqrt(np.clip(np.asarray(jnp.diagonal(cov_n, axis1=1, axis2=2)), 0, None))
     stderr = PixelParams(
         rho_d=math.pi * np.sqrt(np.clip(var_a, 0, None)),
