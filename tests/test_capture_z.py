@@ -49,3 +49,39 @@ def test_smoothing_inside_is_the_gaussian_mean_and_averages_the_noise():
         np.testing.assert_allclose(smooth[..., c][inner], mean[inner], rtol=0, atol=2e-4)
     resid = (smooth - img)[inner]
     assert abs(resid.var() / (0.01**2 / (4 * np.pi * SIGMA**2)) - 1) < 0.15
+
+
+@pytest.fixture(scope="module")
+def capture_z_rows():
+    """40 captures drawn and fitted as ``python -m benchmarks.capture_z --n 40`` does (240 × 180, 8-bit sRGB)."""
+    from benchmarks.capture_z import run
+
+    return run(40, (240, 180))
+
+
+@pytest.mark.slow
+def test_untextured_captures_z_is_unbiased_and_unit(capture_z_rows):
+    """Without a texture the errors are the pixel noise's and the standard's: z of ρs, αx, αy centred (|median|
+    < 0.6; the one-sided smoothing of the standard put it at +1.1 for ρs) with a robust SD between 0.7 and 1.4
+    (10 captures)."""
+    from benchmarks.capture_z import robust_sd
+
+    z = np.array([r.z for r in capture_z_rows if r.texture == "none"])
+    assert np.all(np.abs(np.median(z, axis=0)) < 0.6), np.median(z, axis=0)
+    sd = np.array([robust_sd(z[:, i]) for i in range(3)])
+    assert np.all((sd > 0.7) & (sd < 1.4)), sd
+
+
+@pytest.mark.slow
+@pytest.mark.xfail(
+    strict=True,
+    reason="textured captures: the texture-field σ is too large for αy and ρs on wood and marble (robust z-SD "
+    "0.16–0.62) and too small for αx (1.2–1.4); over all captures 0.66, 1.28, 0.67",
+)
+def test_capture_z_over_40_simulated_captures(capture_z_rows):
+    """The capture-level σ is honest: robust SD of z within 0.8–1.25 for each of ρs, αx, αy over 40 captures
+    (wood, marble, noise and untextured in turn)."""
+    from benchmarks.capture_z import summary
+
+    sd = summary(capture_z_rows)["all"]
+    assert np.all((sd >= 0.8) & (sd <= 1.25)), sd

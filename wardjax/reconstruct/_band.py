@@ -42,14 +42,16 @@ def _smooth_on(image: np.ndarray, mask: np.ndarray, sigma: float) -> np.ndarray:
     m = mask.astype(np.float32)
     inside = m > 0
 
+    def gauss(f, order):  # scipy's stub types ``order`` as int; the documented per-axis sequence works
+        return gaussian_filter(f, sigma, order=order, mode="constant")  # pyright: ignore[reportArgumentType]
+
     def moments(f):  # Σ_q f(q) G(q − p) (1, d_y, d_x) at every p, d = (q − p)/σ: Gaussian derivative filters
-        g = lambda order: gaussian_filter(f, sigma, order=order, mode="constant")
-        return g(0), sigma * g((1, 0)), sigma * g((0, 1))
+        return gauss(f, 0), sigma * gauss(f, (1, 0)), sigma * gauss(f, (0, 1))
 
     s0, sy, sx = moments(m)
-    syy = sigma**2 * gaussian_filter(m, sigma, order=(2, 0), mode="constant") + s0
-    sxx = sigma**2 * gaussian_filter(m, sigma, order=(0, 2), mode="constant") + s0
-    sxy = sigma**2 * gaussian_filter(m, sigma, order=(1, 1), mode="constant")
+    syy = sigma**2 * gauss(m, (2, 0)) + s0
+    sxx = sigma**2 * gauss(m, (0, 2)) + s0
+    sxy = sigma**2 * gauss(m, (1, 1))
     gram = np.stack([np.stack(r, -1) for r in ((s0, sy, sx), (sy, syy, sxy), (sx, sxy, sxx))], -2)[inside]
     # a plane needs pixels spread in both directions: where the weights are not (a thin strip), the mean
     det = np.linalg.det(gram.astype(np.float64))
