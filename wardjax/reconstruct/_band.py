@@ -49,20 +49,21 @@ def _smooth_on(image: np.ndarray, mask: np.ndarray, sigma: float) -> np.ndarray:
         return gauss(f, 0), sigma * gauss(f, (1, 0)), sigma * gauss(f, (0, 1))
 
     s0, sy, sx = moments(m)
-    syy = sigma**2 * gauss(m, (2, 0)) + s0
-    sxx = sigma**2 * gauss(m, (0, 2)) + s0
-    sxy = sigma**2 * gauss(m, (1, 1))
-    gram = np.stack([np.stack(r, -1) for r in ((s0, sy, sx), (sy, syy, sxy), (sx, sxy, sxx))], -2)[inside]
-    # a plane needs pixels spread in both directions: where the weights are not (a thin strip), the mean
-    det = np.linalg.det(gram.astype(np.float64))
-    plane = det > 1e-3 * s0[inside] ** 3
+    syy, sxx, sxy = sigma**2 * gauss(m, (2, 0)) + s0, sigma**2 * gauss(m, (0, 2)) + s0, sigma**2 * gauss(m, (1, 1))
+    # The level of the weighted plane fit: the first row of the 3 × 3 moment matrix's inverse (its cofactors over
+    # the determinant, elementwise on images: no per-pixel stacks, so a 50 MP standard stays a few images).
+    c0, c1, c2 = syy * sxx - sxy * sxy, sxy * sx - sy * sxx, sy * sxy - syy * sx
+    del syy, sxx, sxy
+    det = s0 * c0 + sy * c1 + sx * c2
+    # A plane needs weight spread in both directions; where it is not (a thin strip), the Gaussian mean.
+    plane = inside & (det > 1e-3 * s0**3)
+    det = np.where(plane, det, 1.0)
+    norm = np.where(s0 > 0, s0, 1.0)
     out = np.array(image, np.float32, copy=True)
-    norm = np.where(s0 > 0, s0, 1.0)[inside]
     for c in range(image.shape[-1]):
-        t = np.stack(moments(image[..., c] * m), -1)[inside]
-        mean = t[:, 0] / norm
-        level = np.linalg.solve(np.where(plane[:, None, None], gram, np.eye(3)), t[..., None])[:, 0, 0]
-        out[..., c][inside] = np.where(plane, level, mean)
+        t0, t1, t2 = moments(image[..., c] * m)
+        level = np.where(plane, (c0 * t0 + c1 * t1 + c2 * t2) / det, t0 / norm)
+        out[..., c] = np.where(inside, level, out[..., c])
     return out
 
 
