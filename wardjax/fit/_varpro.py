@@ -412,7 +412,7 @@ class ScanlineSolution(NamedTuple):
     chi2: Float[Array, ""]
     dof: Int[Array, ""]
     status: Int[Array, ""]
-    nonlinear: Int[Array, ""]  # 1 where the curvature check fails (:func:`curvature_check`)
+    nonlinear: Int[Array, ""]  # 2 where the curvature check fails, 1 once profiled (:mod:`._profile` codes)
     cov_gn: Float[Array, "p p"]  # the Gauss–Newton covariance (``cov`` unless it is the sandwich)
 
 
@@ -660,7 +660,7 @@ def solve_scanline(
         ),
     )
     nonlinear = curvature_check(theta, st.chi2, s, p, cov, scale) if iso and check else jnp.zeros((), jnp.int32)
-    nonlinear = jnp.where(status == Status.CONVERGED, nonlinear, 0)
+    nonlinear = jnp.where(status == Status.CONVERGED, 2 * nonlinear, 0)  # 2: the profile is pending
     reported = cov
     if raw is not None:
         mean = p.fbar - s * jnp.broadcast_to(st.bbar, (3,))
