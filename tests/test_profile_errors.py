@@ -194,7 +194,7 @@ def test_profiles_in_the_search_program_equal_the_separate_pass(narrow_tail):
     from wardjax.fit import _data, _profile, _scanline
 
     _, f, wi, wo, sigma = narrow_tail
-    w = None  # unweighted: the profile rescales the sandwich, the longest path
+    w = 1 / sigma**2  # the programs the tests above compiled (unweighted fits share the code path)
     auto = wj.fit_scanlines(f, wi, wo, weights=w)
     apart = wj.fit_scanlines(f, wi, wo, weights=w, errors="profile")  # every converged row, in the separate pass
     rows = auto.errors == "profile"
@@ -211,7 +211,6 @@ def test_profiles_in_the_search_program_equal_the_separate_pass(narrow_tail):
         solver="fast",
         dtype=np.dtype(np.float64),
         chunk=1024,
-        sandwich=w is None,
     )
     done = np.sum(sol.nonlinear == _profile.PROFILED)
     assert done == min(rows.sum(), _scanline._profile_lanes(64, 256))
