@@ -186,3 +186,32 @@ def test_blind_errors_are_honest_on_narrow_and_broad_lobes(alpha_range):
     print(f"\nα {alpha_range}: robust SD of z: α {sd_a:.3f}, ρs {sd_s:.3f}; profiled {frac:.3f}")
     assert 0.85 <= sd_a <= 1.2
     assert 0.85 <= sd_s <= 1.2
+
+
+def test_profiles_in_the_search_program_equal_the_separate_pass(narrow_tail):
+    """The rows failing the curvature check are profiled inside the search program, up to a share of
+    each chunk; the rest (and ``errors="profile"``) in a separate pass. Both give the same σ."""
+    from wardjax.fit import _data, _profile, _scanline
+
+    _, f, wi, wo, sigma = narrow_tail
+    w = 1 / sigma**2  # the programs the tests above compiled (unweighted fits share the code path)
+    auto = wj.fit_scanlines(f, wi, wo, weights=w)
+    apart = wj.fit_scanlines(f, wi, wo, weights=w, errors="profile")  # every converged row, in the separate pass
+    rows = auto.errors == "profile"
+    assert rows.sum() >= 4
+    np.testing.assert_allclose(auto.stderr.alpha_x[rows], apart.stderr.alpha_x[rows], rtol=1e-9)
+    np.testing.assert_allclose(auto.stderr.rho_s[rows], apart.stderr.rho_s[rows], rtol=1e-9)
+    np.testing.assert_allclose(auto.covariance[rows], apart.covariance[rows], rtol=1e-9, atol=1e-300)
+    # the search program itself profiled as many as its lanes hold (48 rows: a 64-row chunk, 4 lanes)
+    data = _data.validate(f, wi, wo, None, w)
+    sol = _scanline._solve(
+        data,
+        iso=True,
+        normalization="ward1992",
+        solver="fast",
+        dtype=np.dtype(np.float64),
+        chunk=1024,
+    )
+    done = np.sum(sol.nonlinear == _profile.PROFILED)
+    assert done == min(rows.sum(), _scanline._profile_lanes(64, 256))
+    assert done + np.sum(sol.nonlinear == _profile.PENDING) >= rows.sum()

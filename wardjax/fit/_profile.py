@@ -33,10 +33,24 @@ import jax.numpy as jnp
 
 from . import _varpro
 
-__all__ = ["PROFILE_HALF", "PROFILE_ITERATIONS", "profile_chunk", "profile_errors"]
+__all__ = [
+    "PENDING",
+    "PROFILED",
+    "PROFILE_HALF",
+    "PROFILE_ITERATIONS",
+    "profile_chunk",
+    "profile_errors",
+    "profile_flagged",
+    "rescale",
+    "rescale_rows",
+]
 
 PROFILE_HALF = 6.0  # farthest a crossing is sought, in Gauss–Newton standard errors of log α
 PROFILE_ITERATIONS = 4  # evaluations per side and parameter: a probe, then false-position steps
+# ``ScanlineSolution.nonlinear`` codes: 0 the curvature check passed (or was not run); PROFILED the
+# profile's σ replaced Gauss–Newton's; PENDING the check failed and the profile is still to be formed.
+PROFILED = 1
+PENDING = 2
 
 
 def _crossing(delta_fn, x0, step, direction):
@@ -105,6 +119,51 @@ def profile_errors(p: _varpro.Prepared, alpha, rho_s, chi2, cov, scale):
     narrow = jnp.clip(jnp.where(jnp.isfinite(corr), corr, 1.0), 0.05, 1.0)
     ends_s = [_crossing(rise_rho_s, theta0, narrow * sd_t, d)[1] for d in (1.0, -1.0)]
     return 0.5 * jnp.abs(ends_s[0] - ends_s[1]), 0.5 * jnp.abs(ends_a[0] - ends_a[1])
+
+
+def rescale(cov, cov_gn, sig):
+    """``cov`` (P, P) with the ρs and α rows and columns scaled by the profile's ``sig = (σ_ρs, σ_α)``
+    over Gauss–Newton's (from ``cov_gn``): the diagonal then holds the profile variances (for an
+    unweighted fit, the sandwich's scaled by the same ratio), the correlations are kept. Returns
+    ``(cov, good)``; where the profile or Gauss–Newton's σ is not a positive number ``cov`` is unchanged.
+    """
+    gn = jnp.sqrt(jnp.clip(jnp.diagonal(cov_gn)[3:5], 0.0, None))
+    good = jnp.all(jnp.isfinite(sig) & (sig > 0)) & jnp.all(gn > 0)
+    ratio = jnp.ones(cov.shape[-1], cov.dtype).at[3:5].set(jnp.where(good, sig / jnp.where(good, gn, 1.0), 1.0))
+    return cov * ratio[:, None] * ratio[None, :], good
+
+
+rescale_rows = jax.jit(jax.vmap(rescale))  # (R, P, P), (R, P, P), (R, 2) → (R, P, P), (R,)
+
+
+def profile_flagged(prepared: _varpro.Prepared, sol: _varpro.ScanlineSolution, lanes: int):
+    """``sol`` of a chunk with the profile errors of its :data:`PENDING` rows, in the same program.
+
+    Up to ``lanes`` pending rows (a static count) are compacted into that many lanes
+    (``jnp.nonzero`` with a static size), profiled there and scattered back: ``sol.cov``
+    rescaled by :func:`rescale`, ``nonlinear`` set to :data:`PROFILED` (0 where the profile gave
+    no usable σ). The cost is ``lanes`` rows' profiles, whatever the chunk's size, and nothing in
+    a chunk with no pending row (a ``lax.cond``). Rows past the lanes stay :data:`PENDING` for
+    the caller to profile apart.
+    """
+    pending = jnp.any(sol.nonlinear == PENDING)
+    return jax.lax.cond(pending, functools.partial(_profile_lanes, lanes=lanes), lambda p, s: s, prepared, sol)
+
+
+def _profile_lanes(prepared, sol, *, lanes: int):
+    pending = sol.nonlinear == PENDING
+    rows = pending.shape[0]
+    idx = jnp.nonzero(pending, size=lanes, fill_value=rows)[0]  # (lanes,), `rows` past the last
+    at = jnp.minimum(idx, rows - 1)
+    sub = jax.tree_util.tree_map(lambda a: a[at], prepared)
+    scale = sol.chi2 / jnp.maximum(sol.dof, 1).astype(sol.chi2.dtype)
+    sig = jax.vmap(profile_errors)(sub, sol.alpha[at, 0], sol.rho_s[at], sol.chi2[at], sol.cov_gn[at], scale[at])
+    cov, good = jax.vmap(rescale)(sol.cov[at], sol.cov_gn[at], jnp.stack(sig, -1))
+    code = jnp.where(good, PROFILED, 0).astype(sol.nonlinear.dtype)
+    # Lanes past the pending rows hold index `rows`: the scatter drops them.
+    return sol._replace(
+        cov=sol.cov.at[idx].set(cov, mode="drop"), nonlinear=sol.nonlinear.at[idx].set(code, mode="drop")
+    )
 
 
 @functools.partial(jax.jit)

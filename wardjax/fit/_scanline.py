@@ -183,19 +183,29 @@ def _geometry_chunk(f, wi, wo, mask, weights, *, normalization, dtype):
     return jnp.swapaxes(f, -1, -2), geom.u, geom.v, geom.g, jnp.swapaxes(w, -1, -2)
 
 
-@functools.partial(jax.jit, static_argnames=("iso", "rtol", "check", "steps"))
-def _search_chunk(prepared, raw=None, *, iso, rtol, check, steps=None):
+@functools.partial(jax.jit, static_argnames=("iso", "rtol", "check", "steps", "lanes"))
+def _search_chunk(prepared, raw=None, *, iso, rtol, check, steps=None, lanes=0):
     """The search of each prepared scanline; with ``raw`` (the geometry stage's arrays) the sandwich
-    covariance too, in the same program (a separate pass cost a third more CPU than the fold)."""
+    covariance too, in the same program (a separate pass cost a third more CPU than the fold); with
+    ``lanes`` the profile errors of up to that many rows that fail the curvature check, in the same program too
+    (:func:`~wardjax.fit._profile.profile_flagged`)."""
     fit = lambda p, r: _varpro.solve_scanline(p, iso=iso, rtol=rtol, check=check, steps=steps, raw=r)
-    return jax.vmap(fit)(prepared, raw)
+    sol = jax.vmap(fit)(prepared, raw)
+    return _profile.profile_flagged(prepared, sol, lanes) if lanes else sol
 
 
-def _fast_chunk(f, wi, wo, mask, weights, n, *, iso, rtol, normalization, dtype, check, sandwich, steps=None):
+def _profile_lanes(rows: int, n_pad: int) -> int:
+    """Rows of a chunk of ``rows`` its search program profiles: 1/16 (1/8 for small problems, where more
+    fits fail the curvature check: about 9 % at 9 samples, 1–3 % at 256)."""
+    return max(rows // (8 if n_pad <= TINY else 16), 1)
+
+
+def _fast_chunk(f, wi, wo, mask, weights, n, *, iso, rtol, normalization, dtype, check, sandwich, steps=None, lanes=0):
     # Geometry and moments as separate programs too: ~25 % less CPU than one.
     parts = _geometry_chunk(f, wi, wo, mask, weights, normalization=normalization, dtype=dtype)
     prepared = moments_chunk(*parts, n, iso=iso)
-    return _search_chunk(prepared, parts if sandwich else None, iso=iso, rtol=rtol, check=check, steps=steps)
+    raw = parts if sandwich else None
+    return _search_chunk(prepared, raw, iso=iso, rtol=rtol, check=check, steps=steps, lanes=lanes)
 
 
 def _steps(max_steps) -> int | None:
@@ -314,11 +324,11 @@ def fit_scanlines(
                 sandwich=sandwich,
                 **kw,
             )
-            for full, part in zip(sol, again):
+            for full, part in zip(sol, again):  # profiled or pending alike
                 full[redo] = part
     if solver == "fast" and iso and errors != "gauss_newton":
         if errors == "profile":
-            sol.nonlinear[:] = 1
+            sol.nonlinear[sol.status == Status.CONVERGED] = _profile.PENDING
         _profile_where_nonlinear(sol, data, normalization=normalization, devices=devices)
     else:
         sol.nonlinear[:] = 0
@@ -393,6 +403,8 @@ def _solve(
         # grid slice, which is tighter than the padded gather (64 grid samples, not 128, at N = 256:
         # ~30 % faster in float32).
         n = None if n_pad == n_true else jnp.asarray(n_true, jnp.int32)
+        # The profiles in the search program: float64 only (a float32 profile's χ² rises round too coarsely).
+        profile_here = check and iso and solver == "fast" and dtype == np.float64
         pieces = []
         for start, stop, rows in buckets(n_rows, chunk):
             rows = -(-rows // len(devices)) * len(devices)  # whole rows on every device
@@ -408,6 +420,7 @@ def _solve(
                     check=check,
                     sandwich=sandwich,
                     steps=steps,
+                    lanes=_profile_lanes(rows, n_pad) if profile_here else 0,
                 )
             else:
                 out = _optimistix_chunk(*clean(*args, dtype=dtype), normalization=normalization)
@@ -417,16 +430,18 @@ def _solve(
 
 
 def _profile_where_nonlinear(sol: _varpro.ScanlineSolution, data, *, normalization, devices=None) -> None:
-    """Profile-likelihood errors of ρs and α, in float64, for the rows whose curvature check failed.
+    """Profile-likelihood errors of ρs and α, in float64, for the rows still pending a profile.
 
-    Rescales those rows of ``sol.cov`` (in place) so that its diagonal holds the
+    The search program profiles the rows that fail its curvature check itself, up to a share of each
+    chunk (:func:`_profile_lanes`); this pass takes the rest (a chunk with more failures, float32 fits,
+    ``errors="profile"``). Rescales those rows of ``sol.cov`` (in place) so that its diagonal holds the
     profile variances; the correlations stay the Gauss–Newton ones. ``sol.nonlinear``
     keeps which rows changed. Only these rows pay for the 33-point profiles,
     split over ``devices`` along the scanline axis as :func:`_solve` splits the fits.
     """
     devices = _check_devices(devices)
     put = _placement(devices, direct=False)
-    rows = np.flatnonzero(sol.nonlinear.astype(bool) & (sol.status == Status.CONVERGED))
+    rows = np.flatnonzero((sol.nonlinear == _profile.PENDING) & (sol.status == Status.CONVERGED))
     if not rows.size:
         return
     sub = tuple(None if a is None else a[rows] for a in data)
@@ -449,13 +464,10 @@ def _profile_where_nonlinear(sol: _varpro.ScanlineSolution, data, *, normalizati
             sig = _profile.profile_chunk(prepared, *pick)
             out.append(np.stack([np.asarray(v)[: stop - start] for v in sig], -1))
         sig = np.concatenate(out)
-    cov = sol.cov[rows]  # the sandwich for unweighted fits: scaled by the profile's ratio to Gauss–Newton
-    gn = np.sqrt(np.clip(np.diagonal(sol.cov_gn[rows], axis1=-2, axis2=-1)[:, 3:5], 0.0, None))
-    ratio = np.ones((rows.size, cov.shape[-1]))
-    good = np.all(np.isfinite(sig) & (sig > 0), axis=-1) & np.all(gn > 0, axis=-1)
-    ratio[good, 3:5] = sig[good] / gn[good]
-    sol.cov[rows] = cov * ratio[:, :, None] * ratio[:, None, :]
-    sol.nonlinear[rows] = np.where(good, 1, 0)
+        # The sandwich for unweighted fits: scaled by the profile's ratio to Gauss–Newton.
+        cov, good = _profile.rescale_rows(sol.cov[rows], sol.cov_gn[rows], sig)
+        sol.cov[rows] = np.asarray(cov)
+    sol.nonlinear[rows] = np.where(np.asarray(good), _profile.PROFILED, 0)
 
 
 def _assemble(sol, data, model, normalization, solver, sandwich=False) -> ScanlineFit:
@@ -477,7 +489,7 @@ def _assemble(sol, data, model, normalization, solver, sandwich=False) -> Scanli
         normalization=normalization,
         solver=solver,
         _data=data,
-        errors=np.where(sol.nonlinear.astype(bool), "profile", "sandwich" if sandwich else "gauss_newton"),
+        errors=np.where(sol.nonlinear == _profile.PROFILED, "profile", "sandwich" if sandwich else "gauss_newton"),
     )
 
 

@@ -412,7 +412,7 @@ class ScanlineSolution(NamedTuple):
     chi2: Float[Array, ""]
     dof: Int[Array, ""]
     status: Int[Array, ""]
-    nonlinear: Int[Array, ""]  # 1 where the curvature check fails (:func:`curvature_check`)
+    nonlinear: Int[Array, ""]  # 2 where the curvature check fails, 1 once profiled (:mod:`._profile` codes)
     cov_gn: Float[Array, "p p"]  # the Gauss–Newton covariance (``cov`` unless it is the sandwich)
 
 
@@ -543,19 +543,15 @@ def sandwich_covariance(theta, rho_s, cov, scale, f, u, v, g, w, mean=None):
         b = g * jnp.exp(-(u * ix + v * iy) - theta[0] - theta[1])
         dlog = jnp.stack([2.0 * u * ix - 1.0, 2.0 * v * iy - 1.0])  # (2, N)
     ww = jnp.broadcast_to(w, (3, n))
-    ones = jnp.ones((n,), b.dtype)
-    # Every sum over samples is one mat-vec against ones of materialised products (the
-    # barriers): XLA:CPU vectorises those, where a fused multiply-reduce runs serially and
-    # small batched matmuls run one fit at a time (see :func:`stats`).
     spec = rho_s * b
-    resid = jax.lax.optimization_barrier(f - spec[None, :])
+    resid = f - spec[None, :]
     if mean is None:
         # ρd per channel at this (θ, ρs) solves its normal equation: the weighted mean of f − ρs b.
         wsum = jnp.where(ww.sum(-1) > 0, ww.sum(-1), 1.0)
-        mean = (ww * resid) @ ones / wsum
+        mean = jnp.sum(ww * resid, axis=-1) / wsum
     resid = resid - mean[:, None]  # (3, N)
     # J per observation: one-hot ρd_c / π, then b, then ρs b ∂log b/∂log α_k / α_k.
-    jl = jnp.concatenate([b[None, :], spec[None, :] * dlog / alpha[:, None]], axis=0)  # (1+k, N)
+    jl = [b] + [spec * dlog[i] / alpha[i] for i in range(k)]  # 1+k of (N,)
     bread = cov / jnp.where(scale > 0, scale, 1.0)
     r2 = (ww * resid) ** 2  # (3, N)
     if n <= LEVERAGE_SAMPLES:
@@ -565,20 +561,27 @@ def sandwich_covariance(theta, rho_s, cov, scale, f, u, v, g, w, mean=None):
         lev = ww * (jnp.diagonal(bread)[:3, None] / jnp.pi**2 + (2.0 / jnp.pi) * cross + jnp.asarray(quad)[None, :])
         # A value with leverage 1 has residual 0: the floor only keeps 0/0 away.
         r2 = r2 / jnp.maximum(1.0 - lev, LEVERAGE_FLOOR) ** 2
-    r2tot = jnp.sum(r2, axis=0)
+    r2c = [r2[c] for c in range(3)]
+    r2tot = r2c[0] + r2c[1] + r2c[2]
     pairs = [(i, j) for i in range(1 + k) for j in range(i, 1 + k)]
-    prods = jnp.concatenate(
-        [r2, (r2[:, None, :] * jl[None, :, :]).reshape(-1, n), jnp.stack([jl[i] * jl[j] * r2tot for i, j in pairs])]
-    )
-    sums = jax.lax.optimization_barrier(prods) @ ones
-    dd = jnp.diag(sums[:3]) / jnp.pi**2
-    dl = sums[3 : 3 + 3 * (1 + k)].reshape(3, 1 + k) / jnp.pi
-    ll = jnp.zeros((1 + k, 1 + k), b.dtype)
-    for m, (i, j) in enumerate(pairs):
-        val = sums[3 + 3 * (1 + k) + m]
-        ll = ll.at[i, j].set(val).at[j, i].set(val)
+    terms = r2c + [r2c[c] * jl[i] for c in range(3) for i in range(1 + k)] + [jl[i] * jl[j] * r2tot for i, j in pairs]
+    # All sums over samples in one variadic reduction: one loop reads the samples once and keeps an
+    # accumulator per sum. Measured on 1,024 scanlines of 256 samples: 6 ms, against 18 ms for the
+    # same sums as a mat-vec against ones of the materialised products (25 MB of memory traffic)
+    # and 12–15 ms as separate reductions (each re-reading the samples).
+    sums = _sum_samples(terms)
+    dd = jnp.diag(jnp.stack(sums[:3])) / jnp.pi**2
+    dl = jnp.stack(sums[3 : 3 + 3 * (1 + k)]).reshape(3, 1 + k) / jnp.pi
+    vals = dict(zip(pairs, sums[3 + 3 * (1 + k) :]))
+    ll = jnp.stack([jnp.stack([vals[min(i, j), max(i, j)] for j in range(1 + k)]) for i in range(1 + k)])
     meat = jnp.block([[dd, dl], [dl.T, ll]])
     return _matmul(_matmul(bread, meat), bread)
+
+
+def _sum_samples(terms):
+    """``[Σ_n x[n] for x in terms]`` of equally shaped ``(N,)`` arrays as one variadic reduction."""
+    zeros = tuple(jnp.zeros((), x.dtype) for x in terms)
+    return jax.lax.reduce(tuple(terms), zeros, lambda a, b: tuple(x + y for x, y in zip(a, b)), (0,))
 
 
 def _matmul(a, b):
@@ -657,7 +660,7 @@ def solve_scanline(
         ),
     )
     nonlinear = curvature_check(theta, st.chi2, s, p, cov, scale) if iso and check else jnp.zeros((), jnp.int32)
-    nonlinear = jnp.where(status == Status.CONVERGED, nonlinear, 0)
+    nonlinear = jnp.where(status == Status.CONVERGED, 2 * nonlinear, 0)  # 2: the profile is pending
     reported = cov
     if raw is not None:
         mean = p.fbar - s * jnp.broadcast_to(st.bbar, (3,))
