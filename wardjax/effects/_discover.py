@@ -75,6 +75,7 @@ from ._evidence import _NOISE_Z, _dominant_first, _gap_p, _lr_p, _within_noise
 from ._holdout import Holdout
 from ._inputs import _check_inputs, _split_library
 from ._recheck import VariogramRecheck
+from ._remeasure import TextureRemeasure
 from ._report import Candidate, DiscoveryReport, FitState, Step
 from ._solve import _cov_full, _fit_batch, _Layout, _residual_view
 from ._structure import _binned_test
@@ -135,6 +136,7 @@ class _Search:
         self.cross: CrossTexture | None = None  # set when the texture is carried (design effects)
         self.recheck: VariogramRecheck | None = None  # ... and the guard's second opinion
         self.holdout: Holdout | None = None  # the winner must predict held-out scanlines
+        self.remeasure: TextureRemeasure | None = None  # the texture measured again after each named effect
         # whitened by the texture's covariance, an LM step costs far more than a call's overhead: each fit alone
         # (batched, the baseline's 3 starts ran padded to the step's 16, every one until the slowest converged)
         self.solo = self.n_obs >= _SOLO_MIN_OBS or getattr(data, "whiten", None) is not None
@@ -475,6 +477,7 @@ class _Steps:
         self.partial: list[Candidate] = []
         self.ambiguous: list[tuple[str, str, float]] = []
         self.variogram_gap: float | None = None  # the gap the stop rule read under the variogram's covariance
+        self.textures: list[dict | None] = []  # the texture measured again after each named effect (None: none)
 
     def _noise_v(self, gap: float | None, st: FitState) -> bool:
         """The stop rule on the ``gap`` the variogram's covariance read for ``st``'s model (same dof)."""
@@ -526,6 +529,14 @@ class _Steps:
             ]
             i_win = next(i for i in remaining if testable[i].name == win.effect)
             new = search.residual_view(by_effect[i_win])
+            got = None if search.remeasure is None else search.remeasure(cur.state, new.state)
+            if got is not None:  # both models under the texture measured where the effect cannot hide
+                remeasure, (search, before, after, summary) = search.remeasure, got
+                search.remeasure = remeasure
+                cur, new = search.residual_view(before), search.residual_view(after)
+                win = dataclasses.replace(win, state=after)
+                self.states[-1] = before
+                self.textures.append(summary)
             self.steps.append(_make_step(testable[i_win], win, cands, cur, new, sample))
             self.found.append(testable[i_win].name)
             self.cur = new
@@ -542,18 +553,31 @@ def _baseline(model, data, testable, lm_steps: int, chunk: int, texture: bool):
     per run, not two: ~3 s of tracing even with the compile cache warm).
     """
     carry = texture and model.kind == "scanline" and getattr(data, "kind", None) in ("ratio", "brdf")
-    search = _Search(model, identity_whitened(data) if carry else data, testable, lm_steps, chunk)
-    cur = search.residual_view(_fit_baseline(search))
-    textured = with_texture(data, cur.pred, cur.rho) if carry else None
-    if carry and textured is None:  # no texture: the plain data (the identity costs a dense product per evaluation)
-        search = _Search(model, data, testable, lm_steps, chunk)
-    if textured is None:
-        return _with_holdout(search), cur, None
-    data_tex, tex, cross = textured
-    search = _Search(model, data_tex, testable, lm_steps, chunk)
-    search.cross = cross
-    search.recheck = VariogramRecheck(lambda d: _Search(model, d, testable, lm_steps, chunk), data, cur.pred, cur.rho)
-    return _with_holdout(search, tex.get("levels")), search.residual_view(_fit_baseline(search)), tex
+    plain = _Search(model, identity_whitened(data) if carry else data, testable, lm_steps, chunk)
+    cur = plain.residual_view(_fit_baseline(plain))
+
+    def make(d):
+        return _Search(model, d, testable, lm_steps, chunk)
+
+    def textured(pred, rho, known=False):
+        """The run's search with the texture measured on the residuals about ``pred``, and its summary (``known``:
+        the texture was found on the baseline, so it is carried whatever its significance now)."""
+        got = with_texture(data, pred, rho, significant=known)
+        if got is None:  # no texture left: white noise, in the identity's layout (the run's compiled program)
+            return _with_holdout(plain), None
+        data_tex, tex, cross = got
+        search = make(data_tex)
+        search.cross = cross
+        search.recheck = VariogramRecheck(make, data, pred, rho)
+        return _with_holdout(search, tex.get("levels")), tex
+
+    if not carry:
+        return _with_holdout(plain), cur, None
+    search, tex = textured(cur.pred, cur.rho)
+    if tex is None:  # no texture: the plain data (the identity costs a dense product per evaluation)
+        return _with_holdout(make(data)), cur, None
+    search.remeasure = TextureRemeasure(plain, textured)
+    return search, search.residual_view(_fit_baseline(search)), tex
 
 
 def _with_holdout(search: _Search, levels: dict | None = None) -> _Search:
@@ -676,6 +700,7 @@ def discover(
             "max_steps": max_steps,
             "criterion": "BIC+LR",
             "texture": tex,
+            "texture_after": run.textures,
             "stop_rule": f"χ² − dof ≤ {_NOISE_Z:g}·√(2 dof)" if stop_within_noise else None,
             "stopped_within_noise": stopped,
             "variogram_gap": run.variogram_gap,
