@@ -535,6 +535,7 @@ class _Steps:
                 search.remeasure = remeasure
                 cur, new = search.residual_view(before), search.residual_view(after)
                 win = dataclasses.replace(win, state=after)
+                cands = [win if c.effect == win.effect else c for c in cands]  # the model averaging reads it there
                 self.states[-1] = before
                 self.textures.append(summary)
             self.steps.append(_make_step(testable[i_win], win, cands, cur, new, sample))
