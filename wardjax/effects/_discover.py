@@ -78,13 +78,14 @@ from ._recheck import VariogramRecheck
 from ._remeasure import TextureRemeasure
 from ._report import Candidate, DiscoveryReport, FitState, Step
 from ._solve import _cov_full, _fit_batch, _Layout, _residual_view
+from ._step_record import flat as _flat
+from ._step_record import make_step, plot_sampler
 from ._structure import _binned_test
 from ._texture_term import CrossTexture, identity_whitened, with_texture
 from ._verdict import unexplained_structure
 
 __all__ = ["discover"]
 
-_PLOT_MAX = 20_000
 _SOLO_MIN_OBS = 20_000  # from this many residuals on, each fit is solved alone (_fit_batch)
 # An unconverged fit that matters gets up to this many more rounds of lm_steps (_Search.refine): with the
 # default cap of 20 steps, 240 steps in all.
@@ -102,11 +103,6 @@ _CONFUSABLE = {
     "coloured_specular": ("gamma",),
 }
 _REFINE_BIC = 0.5  # ... a runner-up matters if its ΔBIC (a lower bound) is at least this fraction of the winner's
-
-
-def _flat(a, mask):
-    a = np.asarray(a)
-    return a[mask] if mask is not None else a.ravel()
 
 
 class _View(NamedTuple):
@@ -419,53 +415,6 @@ def _rank_candidates(search: _Search, cur: _View, remaining: list[int]):
     return _dominant_first(cands), by_effect
 
 
-def _plot_sampler(mask, n_flat: int, seed: int):
-    """A function flattening an array of the data's shape to the points kept for the plots.
-
-    Keeps all ``n_flat`` points, or a fixed random subsample of ``_PLOT_MAX``
-    of them (seeded by ``seed``) so that the report stays small on large data;
-    the same points are kept before and after every step.
-    """
-    pick = None
-    if n_flat > _PLOT_MAX:
-        pick = np.sort(np.random.default_rng(seed).choice(n_flat, _PLOT_MAX, replace=False))
-
-    def sample(a):
-        v = _flat(a, mask)
-        return v[pick] if pick is not None else v
-
-    return sample
-
-
-def _make_step(e: Effect, win: Candidate, cands: list[Candidate], cur: _View, new: _View, sample) -> Step:
-    """The report's record of adding ``e``: its parameters ± σ, the evidence, the gap and the plot data.
-
-    The plot data (residuals against the effect's covariate before and after)
-    are kept only when ``sample`` is given and the covariate exists.
-    """
-    plot = None
-    if sample is not None and e.covariate in cur.covs:
-        plot = {
-            "covariate": e.covariate,
-            "x_before": sample(cur.covs[e.covariate]),
-            "r_before": sample(cur.r.reshape(np.shape(cur.pred))),
-            "x_after": sample(new.covs[e.covariate]),
-            "r_after": sample(new.r.reshape(np.shape(new.pred))),
-        }
-    return Step(
-        effect=e.name,
-        title=e.title,
-        side=e.side,
-        params=new.state.values[e.name],
-        stderr=new.state.sigma[e.name],
-        evidence=win,
-        candidates=cands,
-        gap_before=cur.state.gap,
-        gap_after=new.state.gap,
-        plot=plot,
-    )
-
-
 class _Steps:
     """The step loop's state: the current fit, the states so far, what was found, partial matches, ambiguities."""
 
@@ -504,8 +453,15 @@ class _Steps:
                 break
             cands, by_effect = ranked
             win = cands[0]
+            read = _reread(search, cur, win, by_effect, remaining)  # the covariance where the leader cannot hide
+            if read is not None:
+                search, cur, win, summary = read
+                cands = [win if c.effect == win.effect else c for c in cands]  # the model averaging reads it there
             if not (win.delta_bic > 0 and win.p_value * len(remaining) < alpha):
                 break
+            if read is not None:  # the step stands under the new covariance: the model before it too
+                self.states[-1] = cur.state
+                self.textures.append(read[3])
             hold = None if search.holdout is None else search.holdout(cur.state, win.state, win.delta_chi2)
             if hold is not None:
                 win = dataclasses.replace(win, holdout=hold)
@@ -528,21 +484,40 @@ class _Steps:
                 and win.delta_bic - c.delta_bic < _AMBIGUOUS_BIC
             ]
             i_win = next(i for i in remaining if testable[i].name == win.effect)
-            new = search.residual_view(by_effect[i_win])
-            got = None if search.remeasure is None else search.remeasure(cur.state, new.state)
-            if got is not None:  # both models under the texture measured where the effect cannot hide
-                remeasure, (search, before, after, summary) = search.remeasure, got
-                search.remeasure = remeasure
-                cur, new = search.residual_view(before), search.residual_view(after)
-                win = dataclasses.replace(win, state=after)
-                cands = [win if c.effect == win.effect else c for c in cands]  # the model averaging reads it there
-                self.states[-1] = before
-                self.textures.append(summary)
-            self.steps.append(_make_step(testable[i_win], win, cands, cur, new, sample))
+            new = search.residual_view(win.state if read is not None else by_effect[i_win])
+            self.steps.append(make_step(testable[i_win], win, cands, cur, new, sample))
             self.found.append(testable[i_win].name)
             self.cur = new
             self.states.append(new.state)
         return False
+
+
+def _reread(search: _Search, cur: _View, win: Candidate, by_effect: dict, remaining: list[int]):
+    """The step's leader and the model before it under the texture measured on the leader's residuals
+    (:mod:`wardjax.effects._remeasure`), its evidence read again there: ``(search, cur, win)``, or ``None``
+    where the texture is not carried, the leader has no fit, or a refit fails."""
+    i = next((i for i in remaining if search.testable[i].name == win.effect), None)
+    if search.remeasure is None or i is None or i not in by_effect or win.delta_chi2 <= 0:
+        return None
+    got = search.remeasure(cur.state, by_effect[i])
+    if got is None:
+        return None
+    new, before, after, summary = got
+    new.remeasure = search.remeasure
+    e, view = search.testable[i], new.residual_view(before)
+    dchi2 = max(before.chi2 - after.chi2, 0.0) if e.physical(after.values[e.name]) else 0.0
+    cand = dataclasses.replace(
+        win,
+        delta_chi2=dchi2,
+        delta_bic=dchi2 - win.k * new.ln_n,
+        p_value=_lr_p(dchi2, e, win.k),
+        explained=dchi2 / max(before.chi2 - before.dof, dchi2, 1e-300),
+        state=after,
+        gap_p_after=_gap_p(after.chi2, after.dof),
+    )
+    if new.cross is not None and cand.delta_bic > 0:
+        cand = _deflated(new, view, cand, after)
+    return new, view, cand, summary
 
 
 def _baseline(model, data, testable, lm_steps: int, chunk: int, texture: bool):
@@ -668,7 +643,7 @@ def discover(
     search, cur, tex = _baseline(model, data, testable, lm_steps, chunk, texture)
     sample = None
     if keep_plot_data:
-        sample = _plot_sampler(search.mask, int(search.mask.sum()) if search.mask is not None else cur.r.size, seed)
+        sample = plot_sampler(search.mask, int(search.mask.sum()) if search.mask is not None else cur.r.size, seed)
     run = _Steps(cur)
     stopped = run.search(search, max_steps, alpha, min_explained, structure_p, stop_within_noise, sample, progress)
     cur, states, found, steps, partial = run.cur, run.states, run.found, run.steps, run.partial

@@ -16,24 +16,27 @@ Why
     of a percent or two.
 
 The step
-    After each named effect, the model with it is refitted under white
-    noise (the identity whitening: the same compiled program), the texture
-    and the white noise are measured on its residuals exactly as on the
-    baseline's, and both the model before the step and the model after it
-    are refitted under the new covariance, from where they stand. So a
-    step's gap before → after compares the two models under one
-    covariance, the one measured where the named effect can no longer hide
-    in it, and the next step starts from it. The texture found on the
-    baseline is carried on whatever the significance test reads on the new
-    residuals: off the highlight they hold the texture and the noise's own
-    correlation along the scanline (the standard's smoothing and the
-    quantisation correlate neighbouring values), which the second
-    differences behind the white-noise estimate undercount — on an untouched,
-    untextured capture the white σ alone read the true residuals at 1.06.
+    At each step the leader — the candidate with the best evidence under the
+    current covariance — is refitted under white noise (the identity
+    whitening: the same compiled program), the texture and noise are
+    measured on its residuals exactly as on the baseline's, and the current
+    model and the leader are both refitted under the new covariance, from
+    where they stand. The leader's evidence (Δχ², ΔBIC, the LR test, the
+    design effect) is read there and the decision to add it is taken on that
+    reading (``discover``'s ``_reread``): the effect's signal no longer
+    discounts its own evidence (an untouched textured desk read a baseline
+    gap of 0.95 and anisotropy was refused). A step's gap before → after
+    compares the two models under one covariance, and the next step starts
+    from it. A leader that is not added leaves the run as it was: the
+    covariance measured without it stands.
 
-    The decision to add the effect itself was taken under the baseline's
-    covariance, the conservative one: its evidence is only ever
-    discounted by the effect's own signal, never inflated by it.
+    The texture found on the baseline is carried on whatever the
+    significance test reads on the new residuals: off the highlight they
+    hold the texture and the noise's own correlation along the scanline (the
+    standard's smoothing and the quantisation correlate neighbouring
+    values), which the second differences behind the white-noise estimate
+    undercount — on an untouched, untextured capture the white σ alone read
+    the true residuals at 1.06.
 """
 
 from __future__ import annotations
