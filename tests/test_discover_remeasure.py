@@ -57,10 +57,11 @@ def test_gap_after_the_true_effect_returns_to_the_noise_band(tmp_path):
     baseline's residuals, its signal was carried as 'texture' and the gap after it fell to 0.88–0.89, below
     the band 1 ± 2√(2/dof); measured on the residuals of the model with it, the gap after is no longer below
     the band (1.026 here, 2.2 SD above 1: the fit's bias on ρs and α, below) and the baseline reads above it."""
+    from wardjax._data import table1_materials
     from wardjax.effects import ScanlineModel, discover
     from wardjax.effects._capture import capture_data
 
-    p = wj.WardParams(rho_d=(0.3, 0.25, 0.2), rho_s=0.039, alpha_x=0.137, alpha_y=0.15)
+    p = table1_materials()["desk"]
     cap = wj.simulate_capture(p, tmp_path / "desk", seed=1, image_size=(160, 120), texture="none")
     rep = discover(ScanlineModel(cap.config.fit.normalization), capture_data(cap, max_samples=6000), texture=True)
     assert rep.found == ["anisotropy"]
