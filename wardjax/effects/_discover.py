@@ -75,15 +75,17 @@ from ._evidence import _NOISE_Z, _dominant_first, _gap_p, _lr_p, _within_noise
 from ._holdout import Holdout
 from ._inputs import _check_inputs, _split_library
 from ._recheck import VariogramRecheck
+from ._remeasure import TextureRemeasure
 from ._report import Candidate, DiscoveryReport, FitState, Step
 from ._solve import _cov_full, _fit_batch, _Layout, _residual_view
+from ._step_record import flat as _flat
+from ._step_record import make_step, plot_sampler
 from ._structure import _binned_test
 from ._texture_term import CrossTexture, identity_whitened, with_texture
 from ._verdict import unexplained_structure
 
 __all__ = ["discover"]
 
-_PLOT_MAX = 20_000
 _SOLO_MIN_OBS = 20_000  # from this many residuals on, each fit is solved alone (_fit_batch)
 # An unconverged fit that matters gets up to this many more rounds of lm_steps (_Search.refine): with the
 # default cap of 20 steps, 240 steps in all.
@@ -101,11 +103,6 @@ _CONFUSABLE = {
     "coloured_specular": ("gamma",),
 }
 _REFINE_BIC = 0.5  # ... a runner-up matters if its ΔBIC (a lower bound) is at least this fraction of the winner's
-
-
-def _flat(a, mask):
-    a = np.asarray(a)
-    return a[mask] if mask is not None else a.ravel()
 
 
 class _View(NamedTuple):
@@ -135,6 +132,7 @@ class _Search:
         self.cross: CrossTexture | None = None  # set when the texture is carried (design effects)
         self.recheck: VariogramRecheck | None = None  # ... and the guard's second opinion
         self.holdout: Holdout | None = None  # the winner must predict held-out scanlines
+        self.remeasure: TextureRemeasure | None = None  # the texture measured again after each named effect
         # whitened by the texture's covariance, an LM step costs far more than a call's overhead: each fit alone
         # (batched, the baseline's 3 starts ran padded to the step's 16, every one until the slowest converged)
         self.solo = self.n_obs >= _SOLO_MIN_OBS or getattr(data, "whiten", None) is not None
@@ -417,53 +415,6 @@ def _rank_candidates(search: _Search, cur: _View, remaining: list[int]):
     return _dominant_first(cands), by_effect
 
 
-def _plot_sampler(mask, n_flat: int, seed: int):
-    """A function flattening an array of the data's shape to the points kept for the plots.
-
-    Keeps all ``n_flat`` points, or a fixed random subsample of ``_PLOT_MAX``
-    of them (seeded by ``seed``) so that the report stays small on large data;
-    the same points are kept before and after every step.
-    """
-    pick = None
-    if n_flat > _PLOT_MAX:
-        pick = np.sort(np.random.default_rng(seed).choice(n_flat, _PLOT_MAX, replace=False))
-
-    def sample(a):
-        v = _flat(a, mask)
-        return v[pick] if pick is not None else v
-
-    return sample
-
-
-def _make_step(e: Effect, win: Candidate, cands: list[Candidate], cur: _View, new: _View, sample) -> Step:
-    """The report's record of adding ``e``: its parameters ± σ, the evidence, the gap and the plot data.
-
-    The plot data (residuals against the effect's covariate before and after)
-    are kept only when ``sample`` is given and the covariate exists.
-    """
-    plot = None
-    if sample is not None and e.covariate in cur.covs:
-        plot = {
-            "covariate": e.covariate,
-            "x_before": sample(cur.covs[e.covariate]),
-            "r_before": sample(cur.r.reshape(np.shape(cur.pred))),
-            "x_after": sample(new.covs[e.covariate]),
-            "r_after": sample(new.r.reshape(np.shape(new.pred))),
-        }
-    return Step(
-        effect=e.name,
-        title=e.title,
-        side=e.side,
-        params=new.state.values[e.name],
-        stderr=new.state.sigma[e.name],
-        evidence=win,
-        candidates=cands,
-        gap_before=cur.state.gap,
-        gap_after=new.state.gap,
-        plot=plot,
-    )
-
-
 class _Steps:
     """The step loop's state: the current fit, the states so far, what was found, partial matches, ambiguities."""
 
@@ -475,6 +426,7 @@ class _Steps:
         self.partial: list[Candidate] = []
         self.ambiguous: list[tuple[str, str, float]] = []
         self.variogram_gap: float | None = None  # the gap the stop rule read under the variogram's covariance
+        self.textures: list[dict | None] = []  # the texture measured again after each named effect (None: none)
 
     def _noise_v(self, gap: float | None, st: FitState) -> bool:
         """The stop rule on the ``gap`` the variogram's covariance read for ``st``'s model (same dof)."""
@@ -501,8 +453,15 @@ class _Steps:
                 break
             cands, by_effect = ranked
             win = cands[0]
+            read = _reread(search, cur, win, by_effect, remaining)  # the covariance where the leader cannot hide
+            if read is not None:
+                search, cur, win, summary = read
+                cands = [win if c.effect == win.effect else c for c in cands]  # the model averaging reads it there
             if not (win.delta_bic > 0 and win.p_value * len(remaining) < alpha):
                 break
+            if read is not None:  # the step stands under the new covariance: the model before it too
+                self.states[-1] = cur.state
+                self.textures.append(read[3])
             hold = None if search.holdout is None else search.holdout(cur.state, win.state, win.delta_chi2)
             if hold is not None:
                 win = dataclasses.replace(win, holdout=hold)
@@ -525,12 +484,40 @@ class _Steps:
                 and win.delta_bic - c.delta_bic < _AMBIGUOUS_BIC
             ]
             i_win = next(i for i in remaining if testable[i].name == win.effect)
-            new = search.residual_view(by_effect[i_win])
-            self.steps.append(_make_step(testable[i_win], win, cands, cur, new, sample))
+            new = search.residual_view(win.state if read is not None else by_effect[i_win])
+            self.steps.append(make_step(testable[i_win], win, cands, cur, new, sample))
             self.found.append(testable[i_win].name)
             self.cur = new
             self.states.append(new.state)
         return False
+
+
+def _reread(search: _Search, cur: _View, win: Candidate, by_effect: dict, remaining: list[int]):
+    """The step's leader and the model before it under the texture measured on the leader's residuals
+    (:mod:`wardjax.effects._remeasure`), its evidence read again there: ``(search, cur, win)``, or ``None``
+    where the texture is not carried, the leader has no fit, or a refit fails."""
+    i = next((i for i in remaining if search.testable[i].name == win.effect), None)
+    if search.remeasure is None or i is None or i not in by_effect or win.delta_chi2 <= 0:
+        return None
+    got = search.remeasure(cur.state, by_effect[i])
+    if got is None:
+        return None
+    new, before, after, summary = got
+    new.remeasure = search.remeasure
+    e, view = search.testable[i], new.residual_view(before)
+    dchi2 = max(before.chi2 - after.chi2, 0.0) if e.physical(after.values[e.name]) else 0.0
+    cand = dataclasses.replace(
+        win,
+        delta_chi2=dchi2,
+        delta_bic=dchi2 - win.k * new.ln_n,
+        p_value=_lr_p(dchi2, e, win.k),
+        explained=dchi2 / max(before.chi2 - before.dof, dchi2, 1e-300),
+        state=after,
+        gap_p_after=_gap_p(after.chi2, after.dof),
+    )
+    if new.cross is not None and cand.delta_bic > 0:
+        cand = _deflated(new, view, cand, after)
+    return new, view, cand, summary
 
 
 def _baseline(model, data, testable, lm_steps: int, chunk: int, texture: bool):
@@ -542,18 +529,31 @@ def _baseline(model, data, testable, lm_steps: int, chunk: int, texture: bool):
     per run, not two: ~3 s of tracing even with the compile cache warm).
     """
     carry = texture and model.kind == "scanline" and getattr(data, "kind", None) in ("ratio", "brdf")
-    search = _Search(model, identity_whitened(data) if carry else data, testable, lm_steps, chunk)
-    cur = search.residual_view(_fit_baseline(search))
-    textured = with_texture(data, cur.pred, cur.rho) if carry else None
-    if carry and textured is None:  # no texture: the plain data (the identity costs a dense product per evaluation)
-        search = _Search(model, data, testable, lm_steps, chunk)
-    if textured is None:
-        return _with_holdout(search), cur, None
-    data_tex, tex, cross = textured
-    search = _Search(model, data_tex, testable, lm_steps, chunk)
-    search.cross = cross
-    search.recheck = VariogramRecheck(lambda d: _Search(model, d, testable, lm_steps, chunk), data, cur.pred, cur.rho)
-    return _with_holdout(search, tex.get("levels")), search.residual_view(_fit_baseline(search)), tex
+    plain = _Search(model, identity_whitened(data) if carry else data, testable, lm_steps, chunk)
+    cur = plain.residual_view(_fit_baseline(plain))
+
+    def make(d):
+        return _Search(model, d, testable, lm_steps, chunk)
+
+    def textured(pred, rho, known=False):
+        """The run's search with the texture measured on the residuals about ``pred``, and its summary (``known``:
+        the texture was found on the baseline, so it is carried whatever its significance now)."""
+        got = with_texture(data, pred, rho, significant=known)
+        if got is None:  # no texture left: white noise, in the identity's layout (the run's compiled program)
+            return _with_holdout(plain), None
+        data_tex, tex, cross = got
+        search = make(data_tex)
+        search.cross = cross
+        search.recheck = VariogramRecheck(make, data, pred, rho)
+        return _with_holdout(search, tex.get("levels")), tex
+
+    if not carry:
+        return _with_holdout(plain), cur, None
+    search, tex = textured(cur.pred, cur.rho)
+    if tex is None:  # no texture: the plain data (the identity costs a dense product per evaluation)
+        return _with_holdout(make(data)), cur, None
+    search.remeasure = TextureRemeasure(plain, textured)
+    return search, search.residual_view(_fit_baseline(search)), tex
 
 
 def _with_holdout(search: _Search, levels: dict | None = None) -> _Search:
@@ -643,7 +643,7 @@ def discover(
     search, cur, tex = _baseline(model, data, testable, lm_steps, chunk, texture)
     sample = None
     if keep_plot_data:
-        sample = _plot_sampler(search.mask, int(search.mask.sum()) if search.mask is not None else cur.r.size, seed)
+        sample = plot_sampler(search.mask, int(search.mask.sum()) if search.mask is not None else cur.r.size, seed)
     run = _Steps(cur)
     stopped = run.search(search, max_steps, alpha, min_explained, structure_p, stop_within_noise, sample, progress)
     cur, states, found, steps, partial = run.cur, run.states, run.found, run.steps, run.partial
@@ -676,6 +676,7 @@ def discover(
             "max_steps": max_steps,
             "criterion": "BIC+LR",
             "texture": tex,
+            "texture_after": run.textures,
             "stop_rule": f"χ² − dof ≤ {_NOISE_Z:g}·√(2 dof)" if stop_within_noise else None,
             "stopped_within_noise": stopped,
             "variogram_gap": run.variogram_gap,
