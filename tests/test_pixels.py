@@ -45,10 +45,16 @@ def test_shared_lobe_and_rho_d_recovered_with_calibrated_sigma():
     np.testing.assert_allclose(pred, clean.clean[:, :1], rtol=1e-6, atol=1e-9)
 
 
-def test_clusters_two_materials_and_none_where_one(monkeypatch):
+def _two_materials():
     scene = flash_views((16, 16), bump_amplitude=0.0)
     data = flash_views_data(scene, seed=2)
     res = wj.fit_pixels(data.f_r, data.wi, data.wo, weights=data.sigma**-2, lobe="clusters", normalization=NORM)
+    return scene, data, res
+
+
+@pytest.mark.slow
+def test_lobes_searched_on_a_sample_equal_the_search_on_all_pixels(monkeypatch):
+    _, data, res = _two_materials()
     # Searched for on a sample of the pixels and refined on all, the lobes and labels are those of the
     # search on all pixels: the same optimum of the same χ², to a small fraction of each lobe's σ.
     monkeypatch.setattr(_pixel_sample, "LOBE_SAMPLE", 96)
@@ -59,6 +65,10 @@ def test_clusters_two_materials_and_none_where_one(monkeypatch):
     for name in ("rho_s", "alpha_x"):
         est, ref, sd = getattr(part, name)[i], getattr(res, name)[j], getattr(res.stderr, name)[j]
         assert np.all(np.abs(est - ref) < 0.1 * sd), (name, est, ref, sd)
+
+
+def test_clusters_two_materials_and_none_where_one():
+    scene, _, res = _two_materials()
     assert res.evidence["clusters"]["n_clusters"] == 2
     order = np.argsort(res.alpha_x)
     np.testing.assert_allclose(res.rho_s[order], scene.rho_s, rtol=0.05)

@@ -138,6 +138,7 @@ def test_profile_errors_match_brute_force_profiles(narrow_tail):
         assert res.stderr.rho_s[i] == pytest.approx(ref_s, rel=0.03), i
 
 
+@pytest.mark.slow
 def test_profile_equals_gauss_newton_where_chi2_is_quadratic():
     rng = np.random.default_rng(42)
     _, f, wi, wo, sigma = blind_scanlines(rng, 64, (0.03, 0.3), span=(3.0, 3.5), offset=1.0)
