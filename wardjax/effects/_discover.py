@@ -494,8 +494,9 @@ class _Steps:
 
 def _reread(search: _Search, cur: _View, win: Candidate, by_effect: dict, remaining: list[int]):
     """The step's leader and the model before it under the texture measured on the leader's residuals
-    (:mod:`wardjax.effects._remeasure`), its evidence read again there: ``(search, cur, win)``, or ``None``
-    where the texture is not carried, the leader has no fit, or a refit fails."""
+    (:mod:`wardjax.effects._remeasure`), its evidence read again there: ``(search, cur, win, texture)``
+    (``texture`` the new covariance's summary), or ``None`` where the texture is not carried, the leader
+    has no fit, or a refit fails."""
     i = next((i for i in remaining if search.testable[i].name == win.effect), None)
     if search.remeasure is None or i is None or i not in by_effect or win.delta_chi2 <= 0:
         return None
