@@ -22,49 +22,9 @@ from numpy.typing import DTypeLike
 from .. import _shapes
 from ..geometry import band_geometry_jnp, rig_constants
 from ._reference import MaskReason
+from ._smooth import smooth_on as _smooth_on
 
 __all__ = ["BandSetup", "Reconstruction", "prepare_bands", "reconstruct_bands", "reconstruct_capture"]
-
-
-def _smooth_on(image: np.ndarray, mask: np.ndarray, sigma: float) -> np.ndarray:
-    """Normalised Gaussian smoothing of ``image`` within ``mask``, to first order; values outside it kept.
-
-    On pixels with ``m = 1``, the value at ``p`` of the plane ``a + b·(q − p)`` fitted to the masked
-    pixels ``q`` with Gaussian weights ``G(q − p)`` (normalised convolution of order 1, Knutsson &
-    Westin 1993). Inside the mask it equals the Gaussian mean ``(G * (m·I)) / (G * m)``; near the mask's
-    edge, where that mean is one-sided, it keeps the standard's gradient (irradiance falloff,
-    vignetting) instead of pulling the edge values towards the inside — the edge next to the stripline
-    is where the mirror points of the probe's brightest columns fall. The values outside (the table,
-    clipped pixels) never bleed in. ``image`` is ``(h, w, C)``, ``mask`` ``(h, w)``.
-    """
-    from scipy.ndimage import gaussian_filter
-
-    m = mask.astype(np.float32)
-    inside = m > 0
-
-    def gauss(f, order):  # scipy's stub types ``order`` as int; the documented per-axis sequence works
-        return gaussian_filter(f, sigma, order=order, mode="constant")  # pyright: ignore[reportArgumentType]
-
-    def moments(f):  # Σ_q f(q) G(q − p) (1, d_y, d_x) at every p, d = (q − p)/σ: Gaussian derivative filters
-        return gauss(f, 0), sigma * gauss(f, (1, 0)), sigma * gauss(f, (0, 1))
-
-    s0, sy, sx = moments(m)
-    syy, sxx, sxy = sigma**2 * gauss(m, (2, 0)) + s0, sigma**2 * gauss(m, (0, 2)) + s0, sigma**2 * gauss(m, (1, 1))
-    # The level of the weighted plane fit: the first row of the 3 × 3 moment matrix's inverse (its cofactors over
-    # the determinant, elementwise on images: no per-pixel stacks, so a 50 MP standard stays a few images).
-    c0, c1, c2 = syy * sxx - sxy * sxy, sxy * sx - sy * sxx, sy * sxy - syy * sx
-    del syy, sxx, sxy
-    det = s0 * c0 + sy * c1 + sx * c2
-    # A plane needs weight spread in both directions; where it is not (a thin strip), the Gaussian mean.
-    plane = inside & (det > 1e-3 * s0**3)
-    det = np.where(plane, det, 1.0)
-    norm = np.where(s0 > 0, s0, 1.0)
-    out = np.array(image, np.float32, copy=True)
-    for c in range(image.shape[-1]):
-        t0, t1, t2 = moments(image[..., c] * m)
-        level = np.where(plane, (c0 * t0 + c1 * t1 + c2 * t2) / det, t0 / norm)
-        out[..., c] = np.where(inside, level, out[..., c])
-    return out
 
 
 def _bbox(mask: np.ndarray, pad: int) -> tuple[slice, slice] | None:
