@@ -73,14 +73,10 @@ def test_untextured_captures_z_is_unbiased_and_unit(capture_z_rows):
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(
-    strict=True,
-    reason="textured captures: the texture-field σ is too large for αy and ρs on wood and marble (robust z-SD "
-    "0.19–0.67) and too small for αx (1.2–1.7); over these 40 captures 0.59, 1.36, 0.66",
-)
 def test_capture_z_over_40_simulated_captures(capture_z_rows):
     """The capture-level σ is honest: robust SD of z within 0.8–1.25 for each of ρs, αx, αy over 40 captures
-    (wood, marble, noise and untextured in turn)."""
+    (wood, marble, noise and untextured in turn; 0.82, 1.11, 0.87 when measured). The texture-field σ is
+    estimated on the sample plane, where the texture is stationary (image columns slant across it)."""
     from benchmarks.capture_z import summary
 
     sd = summary(capture_z_rows)["all"]
