@@ -292,7 +292,7 @@ def test_placement_covariance_is_unbiased_and_positive_definite():
     is positive semi-definite in every draw; over draws its mean is the exact ``g C gᵀ``: with the full
     placements alone for a correlated field (within 8 %, the Monte-Carlo spread ±3 %), and with the partial
     ones scaled by their overlap for an uncorrelated one. The Monte-Carlo covariance of the statistics agrees."""
-    from wardjax.fit._texture_field import placement_covariance
+    from wardjax.fit import placement_covariance
 
     rng = np.random.default_rng(3)
     shape, draws = (56, 52), 150

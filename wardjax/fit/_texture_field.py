@@ -26,6 +26,7 @@ __all__ = [
     "TextureErrors",
     "lobe",
     "placement_covariance",
+    "plane_covariance",
     "sample_raster",
     "texture_field_covariance",
     "with_texture_errors",
@@ -187,6 +188,30 @@ def _design(F, WI, WO, params: WardParams, model: str, normalization: str):
     return w, jac, np.einsum("psnc,qsnc->pq", jac, jac), b, mean
 
 
+def plane_covariance(resid, w, g, cols, points=None) -> np.ndarray:
+    """:func:`placement_covariance` of the response ``g`` ``(P, S, N, 3)`` to the field ``resid`` ``(S, N, 3)``
+    (valid where ``w > 0``), both moved onto a regular grid of the sample plane by :func:`sample_raster`.
+
+    ``points`` ``(S, N, 2)`` (mm); without them, scanline ``s`` lies at ``cols[s]`` and sample ``n`` at ``n``.
+    A cell holding several samples takes the mean of the field and the sum of the responses.
+    """
+    ok = w[..., 0] > 0
+    if points is None:
+        s_idx = np.broadcast_to(np.asarray(cols, np.float64)[:, None], ok.shape)
+        points = np.stack([s_idx, np.broadcast_to(np.arange(ok.shape[1], dtype=np.float64), ok.shape)], -1)
+    ix, iy, shape = sample_raster(np.asarray(points, np.float64), ok)
+    at = (ix[ok], iy[ok])
+
+    def on_raster(a):  # (S, N, ...) summed into the cells of the sample plane
+        out = np.zeros(shape + a.shape[2:])
+        np.add.at(out, at, a[ok])
+        return out
+
+    count = on_raster(w)  # samples per cell (and channel)
+    r_cells = on_raster(np.where(w > 0, resid, 0.0)) / np.maximum(count, 1.0)
+    return placement_covariance(r_cells, count[..., 0] > 0, on_raster(np.moveaxis(g, 0, -2)))
+
+
 def texture_field_covariance(
     F, WI, WO, cols, params: WardParams, model: str, normalization: str, points=None
 ) -> TextureErrors:
@@ -214,11 +239,12 @@ def texture_field_covariance(
     stationary. ``r(0)`` carries the pixel noise, so its contribution is
     included.
 
-    Calibration (simulated textures alone, the response of a 240 × 180
-    capture, 24 draws each): the root-mean estimate over the Monte-Carlo
-    spread of ρs, αx, αy is 0.97/0.81/1.14 on wood, 1.10/1.23/0.94 on
-    broadband noise, 0.78/0.99/0.85 on marble (veins as large as the probe:
-    the fit absorbs part of them, and the residual no longer shows it).
+    Calibration (the simulator's textures alone on one 240 × 180 capture's
+    response, 24 draws each; ``python -m benchmarks.capture_z --texture-alone
+    24``): the root-mean σ over the Monte-Carlo SD of ρs, αx, αy reads
+    0.97/0.81/1.14 on wood, 1.10/1.23/0.94 on broadband noise and
+    0.78/0.99/0.85 on marble, whose veins are as large as the probe: the fit
+    absorbs part of them, and the residual no longer shows it.
 
     Parameters
     ----------
@@ -245,21 +271,7 @@ def texture_field_covariance(
     resid = np.where(w > 0, np.nan_to_num(F) - rs * b[..., None], 0.0)
     n_w = np.maximum(w.sum(axis=1), 1.0)
     resid -= w * (resid.sum(axis=1, keepdims=True) / n_w[:, None, :])  # ρd,s/π profiled out
-    ok = w[..., 0] > 0
-    if points is None:
-        s_idx = np.broadcast_to(np.asarray(cols, np.float64)[:, None], ok.shape)
-        points = np.stack([s_idx, np.broadcast_to(np.arange(ok.shape[1], dtype=np.float64), ok.shape)], -1)
-    ix, iy, shape = sample_raster(np.asarray(points, np.float64), ok)
-    at = (ix[ok], iy[ok])
-
-    def on_raster(a):  # (S, N, ...) summed into the cells of the sample plane
-        out = np.zeros(shape + a.shape[2:])
-        np.add.at(out, at, a[ok])
-        return out
-
-    count = on_raster(w)  # samples per cell (and channel)
-    r_cells = on_raster(resid) / np.maximum(count, 1.0)
-    cov = placement_covariance(r_cells, count[..., 0] > 0, on_raster(np.moveaxis(g, 0, -2)))
+    cov = plane_covariance(resid, w, g, cols, points)
     rho_d_grad = -np.pi * mean.mean(axis=1).T  # (3, P): ρ̄d = π mean_s ⟨f − ρs b⟩_s
     n_valid = w.sum(axis=(0, 1))
     rms = float(np.pi * np.sqrt(np.sum(resid**2) / max(float(n_valid.sum()), 1.0)))
