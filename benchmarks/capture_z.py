@@ -15,6 +15,13 @@ captures, the sampling spread of the statistic included).
 
 Run ``python -m benchmarks.capture_z [--n 48] [--size 240 180] [--seed 0]
 [--out benchmarks/results/capture_z.md]``.
+
+``--texture-alone DRAWS`` checks the texture-field estimator without a fit:
+the response of one capture's joint fit (its true parameters, untextured
+rig) to ``DRAWS`` textures of each kind drawn on its sample points gives the
+Monte-Carlo spread of (ρs, αx, αy); beside it, the root-mean σ the estimator
+reads from each texture itself and from what the fit leaves of it (its
+residual), into ``benchmarks/results/capture_z_texture_alone.md``.
 """
 
 from __future__ import annotations
@@ -27,7 +34,7 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["TEXTURES", "CaptureZ", "draw_params", "fit_one", "robust_sd", "run", "summary"]
+__all__ = ["TEXTURES", "CaptureZ", "draw_params", "fit_one", "robust_sd", "run", "summary", "texture_alone"]
 
 TEXTURES = ("wood", "marble", "noise", "none")
 SHARED = ("rho_s", "alpha_x", "alpha_y")
@@ -139,19 +146,98 @@ def report(rows: list[CaptureZ], size: tuple[int, int]) -> str:
     return "\n".join(lines) + "\n"
 
 
+def _fit_grid(seed: int, size: tuple[int, int]):
+    """The binned fit grid of capture ``seed`` drawn untextured: ``(params, model, normalization, F, WI, WO, cols,
+    points)`` as :func:`wardjax.fit_capture` hands them to the texture-field estimator."""
+    from wardjax import load_capture
+    from wardjax.run._fit_capture import MIN_SCANLINE_SAMPLES, _bin_bands, prepare_bands
+    from wardjax.simulate import simulate_capture
+
+    p = draw_params(seed)
+    with tempfile.TemporaryDirectory() as tmp:
+        simulate_capture(p, Path(tmp) / "c", seed=seed, image_size=size, texture="none")
+        cap = load_capture(Path(tmp) / "c")
+        bins = _bin_bands(cap, prepare_bands(cap, band_rows=512), 50_000, 512)[0]
+    keep = np.sum(np.all(np.isfinite(bins.f_r), axis=-1), axis=1) >= MIN_SCANLINE_SAMPLES
+    fit = cap.config.fit
+    return (
+        p,
+        fit.model,
+        fit.normalization,
+        bins.f_r[keep],
+        bins.wi[keep],
+        bins.wo[keep],
+        np.flatnonzero(keep),
+        (bins.points[keep]),
+    )
+
+
+def texture_alone(seed: int, size: tuple[int, int], draws: int, kinds=TEXTURES[:3]) -> dict[str, np.ndarray]:
+    """Per texture kind ``(3, 3)``: Monte-Carlo SD of (ρs, αx, αy) over ``draws`` textures, and the root-mean σ
+    :func:`~wardjax.fit.plane_covariance` reads from the texture and from its residual, over that SD."""
+    from wardjax.fit._texture_field import _design, plane_covariance
+    from wardjax.simulate import plane_texture
+
+    p, model, norm, F, WI, WO, cols, points = _fit_grid(seed, size)
+    w, jac, info, _, _ = _design(F, WI, WO, p, model, norm)
+    g = np.einsum("pq,qsnc->psnc", np.linalg.pinv(info), jac)
+    x, y = (np.nan_to_num(points[..., k]) for k in (0, 1))
+    out = {}
+    for kind in kinds:
+        theta, est = [], []
+        for k in range(draws):
+            df = w * np.asarray(p.rho_d) * (plane_texture(kind, x, y, seed=1000 + k)[..., None] - 1) / np.pi
+            df -= w * df.sum(axis=1, keepdims=True) / np.maximum(w.sum(axis=1, keepdims=True), 1)
+            th = np.einsum("psnc,snc->p", g, df)
+            resid = df - np.einsum("p,psnc->snc", th, jac)
+            theta.append(th)
+            est.append([np.diag(plane_covariance(a, w, g, cols, points)) for a in (df, resid)])
+        mc = np.sqrt(np.mean(np.square(theta), axis=0))
+        out[kind] = np.vstack([mc, np.sqrt(np.mean(est, axis=0)) / mc])
+    return out
+
+
+def _texture_alone_report(res: dict, seed: int, size: tuple[int, int], draws: int) -> str:
+    from .textured_bench import provenance
+
+    lines = [
+        provenance().rstrip(),
+        "",
+        f"# The texture-field σ on textures alone: capture {seed}'s response, {draws} textures per kind "
+        f"(`python -m benchmarks.capture_z --texture-alone {draws} --seed {seed} --size {size[0]} {size[1]}`)",
+        "",
+        "| texture | MC SD ρs | αx | αy | σ/SD from the texture ρs | αx | αy | from its residual ρs | αx | αy |",
+        "|" + "---|" * 10,
+    ]
+    for kind, (mc, true, resid) in res.items():
+        lines.append(
+            f"| {kind} | " + " | ".join([f"{v:.2g}" for v in mc] + [f"{v:.2f}" for v in (*true, *resid)]) + " |"
+        )
+    return "\n".join(lines) + "\n"
+
+
 def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--n", type=int, default=48, help="captures (default 48)")
     ap.add_argument("--size", type=int, nargs=2, default=(240, 180), metavar=("W", "H"))
     ap.add_argument("--seed", type=int, default=0, help="first capture's seed")
-    ap.add_argument("--out", type=Path, default=Path("benchmarks/results/capture_z.md"))
+    ap.add_argument("--out", type=Path, default=None, help="results file (default under benchmarks/results/)")
+    ap.add_argument("--texture-alone", type=int, default=0, metavar="DRAWS", help="check the estimator, no fit")
     a = ap.parse_args(argv)
     size = (int(a.size[0]), int(a.size[1]))
+    if a.texture_alone:
+        text = _texture_alone_report(texture_alone(a.seed, size, a.texture_alone), a.seed, size, a.texture_alone)
+        print(text)
+        out = a.out or Path("benchmarks/results/capture_z_texture_alone.md")
+        out.parent.mkdir(parents=True, exist_ok=True)
+        out.write_text(text)
+        return
     rows = run(a.n, size, a.seed, progress=lambda r: print(_row(r), flush=True))
     text = report(rows, size)
     print(text)
-    a.out.parent.mkdir(parents=True, exist_ok=True)
-    a.out.write_text(text)
+    out = a.out or Path("benchmarks/results/capture_z.md")
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(text)
 
 
 if __name__ == "__main__":

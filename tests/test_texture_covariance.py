@@ -257,3 +257,58 @@ def test_lag_sums_by_fft_equal_the_sums_over_each_overlap():
                 a[s, i] * b[s + k, i + m] for s in range(7) for i in range(11) if 0 <= s + k < 7 and 0 <= i + m < 11
             )
             assert got[K + k, M + m] == pytest.approx(want, abs=1e-12)
+
+
+# --------------------------------------------------------------------------- the capture fit's texture-field estimator
+
+
+def _field_and_covariance(rng, shape, width, draws):
+    """``draws`` samples of a stationary field (white noise convolved with a Gaussian kernel ``k``) and its exact
+    autocovariance ``c = k ⋆ k`` on lags ``(−G1 … G1) × (−G2 … G2)`` (index ``Δ mod 2G``)."""
+    from scipy.signal import fftconvolve
+
+    half = int(np.ceil(4 * width))
+    t = np.arange(-half, half + 1)
+    k = np.exp(-0.5 * (t[:, None] ** 2 + t[None, :] ** 2) / width**2)
+    k /= np.sqrt(np.sum(k**2))  # unit variance
+    white = rng.standard_normal((draws, shape[0] + 2 * half, shape[1] + 2 * half))
+    fields = fftconvolve(white, k[None], mode="valid", axes=(1, 2))
+    c = fftconvolve(k, k[::-1, ::-1])  # lags −2·half … 2·half
+    lag = np.zeros((2 * shape[0], 2 * shape[1]))
+    i = np.arange(-2 * half, 2 * half + 1)
+    lag[np.ix_(i % lag.shape[0], i % lag.shape[1])] = c
+    return fields, lag
+
+
+def _exact_covariance(g, lag):
+    """``Σ_u Σ_v g_p(u) c(v − u) g_q(v)`` for ``g`` ``(G1, G2, P)`` by FFT on the ``2G`` torus (no wrap)."""
+    gf = np.fft.fft2(g, s=lag.shape, axes=(0, 1))
+    return np.einsum("abp,ab,abq->pq", gf, np.fft.fft2(lag), np.conj(gf)).real / lag.size
+
+
+def test_placement_covariance_is_unbiased_and_positive_definite():
+    """A stationary field of known autocovariance and two statistics of it — a mean over a block and a contrast
+    that changes sign across the block (as a lobe's α-derivative does). From one sample, the placement estimate
+    is positive semi-definite in every draw; over draws its mean is the exact ``g C gᵀ``: with the full
+    placements alone for a correlated field (within 8 %, the Monte-Carlo spread ±3 %), and with the partial
+    ones scaled by their overlap for an uncorrelated one. The Monte-Carlo covariance of the statistics agrees."""
+    from wardjax.fit import placement_covariance
+
+    rng = np.random.default_rng(3)
+    shape, draws = (56, 52), 150
+    g = np.zeros(shape + (2,))
+    g[22:34, 20:32, 0] = 1.0 / 12**2  # a mean over a 12 × 12 block
+    g[22:34, 20:26, 1], g[22:34, 26:32, 1] = 1.0, -1.0  # a contrast: left half minus right half
+    occupied = np.ones(shape, bool)
+    for width, min_overlap in ((2.5, 1.0), (0.0, 0.5)):
+        if width:
+            fields, lag = _field_and_covariance(rng, shape, width, draws)
+            truth = _exact_covariance(g, lag)
+        else:
+            fields = rng.standard_normal((draws,) + shape)
+            truth = np.einsum("abp,abq->pq", g, g)
+        est = np.array([placement_covariance(f[..., None], occupied, g[..., None], min_overlap) for f in fields])
+        assert np.all(np.linalg.eigvalsh(est) >= -1e-12 * np.trace(est, axis1=1, axis2=2)[:, None])
+        np.testing.assert_allclose(np.diag(est.mean(axis=0)), np.diag(truth), rtol=0.08)
+        theta = np.einsum("dab,abp->dp", fields, g)
+        np.testing.assert_allclose(theta.var(axis=0), np.diag(truth), rtol=0.35)  # 150 draws: ±12 % (1σ)

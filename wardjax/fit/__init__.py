@@ -8,6 +8,8 @@ from ._pixels import predict_pixels as predict_pixels
 from ._scanline import ScanlineFit as ScanlineFit
 from ._scanline import fit_scanlines as fit_scanlines
 from ._texture_field import TextureErrors as TextureErrors
+from ._texture_field import placement_covariance as placement_covariance
+from ._texture_field import plane_covariance as plane_covariance
 from ._texture_field import texture_field_covariance as texture_field_covariance
 from ._texture_field import with_texture_errors as with_texture_errors
 
@@ -22,4 +24,6 @@ __all__ = [
     "PixelParams",
     "fit_pixels",
     "predict_pixels",
+    "placement_covariance",
+    "plane_covariance",
 ]

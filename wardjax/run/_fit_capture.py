@@ -225,7 +225,8 @@ def _fit_scanline_capture(cap, *, max_fit_samples: int, band_rows: int, max_step
     # Honest errors: the ρd texture aliases into (ρs, α) in a way no residual-based error sees.
     stage(f"{cap.name}: the texture's share of the errors")
     cols_fit = np.flatnonzero(keep)
-    tex_err = texture_field_covariance(F, WI, WO, cols_fit, comb.params, cfg.fit.model, norm)
+    plane = np.stack([X, Y], axis=-1)  # the samples on the sample plane (mm), where the texture is stationary
+    tex_err = texture_field_covariance(F, WI, WO, cols_fit, comb.params, cfg.fit.model, norm, points=plane)
     comb = with_texture_errors(comb, tex_err)
     if norm == RADIANCE_NORMALIZATION:
         rad = comb
@@ -235,7 +236,10 @@ def _fit_scanline_capture(cap, *, max_fit_samples: int, band_rows: int, max_step
         # same shapes, so the compiled joint solver is reused.
         rad = dataclasses.replace(joint, normalization=RADIANCE_NORMALIZATION).combined(cfg.fit.model)
         rad = with_texture_errors(
-            rad, texture_field_covariance(F, WI, WO, cols_fit, rad.params, cfg.fit.model, RADIANCE_NORMALIZATION)
+            rad,
+            texture_field_covariance(
+                F, WI, WO, cols_fit, rad.params, cfg.fit.model, RADIANCE_NORMALIZATION, points=plane
+            ),
         )
 
     stage(f"{cap.name}: ρd texture at full resolution")

@@ -131,7 +131,7 @@ def _smooth_noise(x, y, rng: np.random.Generator, waves: int = 10, wavelength=(2
 def plane_texture(kind: str, x, y, *, amplitude: float = 0.08, seed: int = 0) -> np.ndarray:
     """A multiplicative ρd modulation ``m(x, y)`` (mean ≈ 1) at sample points (mm).
 
-    ``"wood"``: growth rings running along y (slightly wavy), with fine grain;
+    ``"wood"``: growth rings running along y (slightly wavy, at a phase drawn from ``seed``), with fine grain;
     ``"marble"``: veins, a turbulent sine pattern across the surface;
     ``"noise"``: isotropic broadband noise (wavelengths 2–40 mm, amplitude
     spectrum ∝ wavelength, a 1/f field), no preferred direction;
@@ -144,8 +144,12 @@ def plane_texture(kind: str, x, y, *, amplitude: float = 0.08, seed: int = 0) ->
         return np.ones_like(x)
     if kind == "wood":
         r = x + 1.5 * _smooth_noise(x, y, rng, wavelength=(150.0, 400.0))
-        rings = np.sin(2 * np.pi * r / rng.uniform(9.0, 13.0))
+        period = rng.uniform(9.0, 13.0)
         grain = _smooth_noise(x, y, rng, wavelength=(4.0, 12.0))
+        # The rings' phase is drawn per seed (last, so the other draws stay): anchored at x = 0 they would put
+        # the same ring under the lobe in every capture, and captures of different seeds would not be
+        # independent draws of the texture.
+        rings = np.sin(2 * np.pi * r / period + rng.uniform(0.0, 2 * np.pi))
         m = 0.8 * rings + 0.2 * np.tanh(grain)
     elif kind == "marble":
         th = rng.uniform(0.3, 1.2)
