@@ -101,3 +101,20 @@ def test_second_opinion_names_only_a_winner_that_pays_for_itself_there():
     assert dent.gap_p < 1e-3 and not dent.names(k=2, ln_n=ln_n, design_effect=1.0, min_explained=0.5, structure_p=1e-3)
     # a reading without Δχ² (a stored report of an earlier form) never lets a winner through
     assert not VariogramRead(1.0, 0.5, 1.0, 1.0).names(2, ln_n, 1.0, 0.5, 1e-3)
+
+
+def _cand(name: str, dchi2: float, dbic: float, k: int):
+    from wardjax.effects._report import Candidate
+
+    return Candidate(name, k, dchi2, dbic, 1e-6, 0.02, 1.0, True)
+
+
+def test_a_dominant_candidate_does_not_jump_ahead_of_one_it_does_not_dominate():
+    """The untouched wood desk's first step: an illumination gradient dominates γ by a tenth of a unit of Δχ², but
+    not the anisotropy (more Δχ² on more parameters) that leads it by ΔBIC; the anisotropy leads."""
+    from wardjax.effects._evidence import _dominant_first
+
+    gamma, aniso, ramp = _cand("gamma", 18.8, 9.3, 1), _cand("anisotropy", 57.0, 7.0, 2), _cand("ramp", 18.9, 5.5, 1)
+    assert [c.effect for c in _dominant_first([gamma, aniso, ramp])] == ["anisotropy", "gamma", "ramp"]
+    # without the anisotropy the dominant ramp leads γ, as before
+    assert [c.effect for c in _dominant_first([gamma, ramp])] == ["ramp", "gamma"]

@@ -427,11 +427,11 @@ class _Steps:
         self.ambiguous: list[tuple[str, str, float]] = []
         self.variogram_gap: float | None = None  # the gap the stop rule read under the variogram's covariance
         self.textures: list[dict | None] = []  # the texture measured again after each named effect (None: none)
-        self.search: _Search | None = None  # the search ``cur`` was fitted under (its variogram's second reading)
+        self.cur_search: _Search | None = None  # the search ``cur`` was fitted under (its variogram's second reading)
 
     def final_within(self, structure_p: float) -> bool:
         """The final gap within the noise (``P ≥ structure_p``) under the variogram's covariance, where it is read."""
-        rc = None if self.search is None else self.search.recheck
+        rc = None if self.cur_search is None else self.cur_search.recheck
         got = None if rc is None else rc.gap_p(self.cur.state)
         if got is None or got[1] < structure_p:
             return False
@@ -448,7 +448,7 @@ class _Steps:
     def search(self, search, max_steps, alpha, min_explained, structure_p, stop_within_noise, sample, say) -> bool:
         """Add effects until none is justified; True if it stopped because the gap is within the noise."""
         testable = search.testable
-        self.search = search
+        self.cur_search = search
         for _ in range(max_steps):
             cur = self.cur
             # the stop rule under either of the texture's covariances (the variogram's read where it named the last)
@@ -498,7 +498,7 @@ class _Steps:
             new = search.residual_view(win.state if read is not None else by_effect[i_win])
             self.steps.append(make_step(testable[i_win], win, cands, cur, new, sample))
             self.found.append(testable[i_win].name)
-            self.cur, self.search = new, search
+            self.cur, self.cur_search = new, search
             self.states.append(new.state)
         return False
 
