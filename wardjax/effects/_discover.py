@@ -430,9 +430,11 @@ class _Steps:
         self.cur_search: _Search | None = None  # the search ``cur`` was fitted under (its variogram's second reading)
 
     def final_within(self, structure_p: float) -> bool:
-        """The final gap within the noise (``P ≥ structure_p``) under the variogram's covariance, where it is read."""
-        rc = None if self.cur_search is None else self.cur_search.recheck
-        got = None if rc is None else rc.gap_p(self.cur.state)
+        """The final gap within the noise (``P ≥ structure_p``) under the variogram's covariance, where it is read:
+        the reading of the last refused leader's guard where there is one (the same covariance that refused it)."""
+        v, rc = self.partial[-1].variogram if self.partial else None, getattr(self.cur_search, "recheck", None)
+        dof = self.cur.state.dof
+        got = (v.gap_before, _gap_p(v.gap_before * dof, dof)) if v is not None else rc and rc.gap_p(self.cur.state)
         if got is None or got[1] < structure_p:
             return False
         self.variogram_gap = got[0]
