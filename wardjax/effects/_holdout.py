@@ -29,10 +29,10 @@ The check (two-fold, by alternate blocks of the scanlines)
     half-vector azimuth (anisotropy's covariate), the image position (a lamp
     field's) and the lobe's place change monotonically, so a half predicts
     the other half by extrapolating in the effect's own covariate. Its gain
-    then swings by many times the effect's Δχ² (an untouched desk capture's
-    anisotropy, Δχ² 16–46, read gains of −200 and +1,068: the first refused
-    it). With alternate blocks each fold spans the image and predicts the
-    other by interpolation.
+    then swings by many times the effect's Δχ² (the anisotropy of an untouched
+    wood desk, Δχ² 46–63, read gains of +1,068 at 160 × 120 and −200 at
+    320 × 240, which refused it; with alternate blocks, +100). With alternate
+    blocks each fold spans the image and predicts the other by interpolation.
 
     The scanline levels' Gaussian process (:mod:`~wardjax.effects._levels`)
     is restricted to each half with the covariance estimated on all of them.
