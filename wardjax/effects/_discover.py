@@ -427,6 +427,18 @@ class _Steps:
         self.ambiguous: list[tuple[str, str, float]] = []
         self.variogram_gap: float | None = None  # the gap the stop rule read under the variogram's covariance
         self.textures: list[dict | None] = []  # the texture measured again after each named effect (None: none)
+        self.cur_search: _Search | None = None  # the search ``cur`` was fitted under (its variogram's second reading)
+
+    def final_within(self, structure_p: float) -> bool:
+        """The final gap within the noise (``P ≥ structure_p``) under the variogram's covariance, where it is read:
+        the reading of the last refused leader's guard where there is one (the same covariance that refused it)."""
+        v, rc = self.partial[-1].variogram if self.partial else None, getattr(self.cur_search, "recheck", None)
+        dof = self.cur.state.dof
+        got = (v.gap_before, _gap_p(v.gap_before * dof, dof)) if v is not None else rc and rc.gap_p(self.cur.state)
+        if got is None or got[1] < structure_p:
+            return False
+        self.variogram_gap = got[0]
+        return True
 
     def _noise_v(self, gap: float | None, st: FitState) -> bool:
         """The stop rule on the ``gap`` the variogram's covariance read for ``st``'s model (same dof)."""
@@ -438,6 +450,7 @@ class _Steps:
     def search(self, search, max_steps, alpha, min_explained, structure_p, stop_within_noise, sample, say) -> bool:
         """Add effects until none is justified; True if it stopped because the gap is within the noise."""
         testable = search.testable
+        self.cur_search = search
         for _ in range(max_steps):
             cur = self.cur
             # the stop rule under either of the texture's covariances (the variogram's read where it named the last)
@@ -473,7 +486,7 @@ class _Steps:
                 v = win.variogram
                 if stop_within_noise and self.found and v is not None and self._noise_v(v.gap_before, cur.state):
                     return True  # what is found leaves a gap the variogram's covariance calls noise
-                if v is None or (v.explained < min_explained and v.gap_p < structure_p):
+                if v is None or not v.names(win.k, search.ln_n, win.design_effect, min_explained, structure_p):
                     self.partial.append(win)
                     break
             self.ambiguous += [
@@ -487,7 +500,7 @@ class _Steps:
             new = search.residual_view(win.state if read is not None else by_effect[i_win])
             self.steps.append(make_step(testable[i_win], win, cands, cur, new, sample))
             self.found.append(testable[i_win].name)
-            self.cur = new
+            self.cur, self.cur_search = new, search
             self.states.append(new.state)
         return False
 
@@ -649,7 +662,8 @@ def discover(
     stopped = run.search(search, max_steps, alpha, min_explained, structure_p, stop_within_noise, sample, progress)
     cur, states, found, steps, partial = run.cur, run.states, run.found, run.steps, run.partial
     mask, st = search.mask, cur.state
-    within = stopped or _gap_p(st.chi2, st.dof) >= structure_p  # the verdict follows the gap (_verdict)
+    # the verdict follows the gap (_verdict), under either of the texture's covariances, as the stop rule does
+    within = stopped or _gap_p(st.chi2, st.dof) >= structure_p or run.final_within(structure_p)
     r_flat, covs = _flat(cur.r.reshape(np.shape(cur.pred)), mask), {k: _flat(x, mask) for k, x in cur.covs.items()}
     unexplained, structure = unexplained_structure(r_flat, covs, st, partial, structure_p, within)
     return DiscoveryReport(

@@ -15,9 +15,12 @@ Why a second covariance
     winner are refitted under it, from where they stand, and the guard holds
     only if it holds under both covariances.
 
-    A pure relaxation: nothing the guard lets through is refused, the
-    evidence (ΔBIC, LR) is untouched, and nothing is computed unless the
-    guard is about to refuse. A library winner on a smooth texture typically
+    A relaxation that must be earned: the winner is let through only where it
+    pays for its parameters under the variogram's covariance too
+    (:meth:`~wardjax.effects._report.VariogramRead.names`), not merely because
+    the gap it leaves there is small — where the gap before it is small as
+    well, it explains nothing. The evidence (ΔBIC, LR) is untouched, and
+    nothing is computed unless the guard is about to refuse. A library winner on a smooth texture typically
     leaves a gap within about 1.02 under the variogram; an out-of-library
     effect such as a blurred frame leaves one well above it.
 """
@@ -58,6 +61,16 @@ class VariogramRecheck:
         r = search.fit([(st.u, list(st.free), st.active)])[0]
         return search.state_of(search.refine(r, st.active), st.active)
 
+    def gap_p(self, st: FitState) -> tuple[float, float] | None:
+        """``(gap, P(χ²_dof ≥ χ²))`` of ``st`` refitted under the variogram's covariance; ``None`` where it finds no
+        texture or the refit is not finite: the final state's second reading, so that "unexplained" is said only
+        where the gap exceeds the noise under both covariances the decisions read."""
+        search = self._search
+        if search is None:
+            return None
+        b = self._refit(search, st)
+        return (b.gap, _gap_p(b.chi2, b.dof)) if math.isfinite(b.chi2) else None
+
     def __call__(self, cur: FitState, new: FitState) -> VariogramRead | None:
         """``new`` against ``cur``, both refitted under the variogram's covariance; ``None`` where it finds no
         texture or a refit is not finite."""
@@ -68,4 +81,4 @@ class VariogramRecheck:
         if not (math.isfinite(b.chi2) and math.isfinite(w.chi2)):
             return None
         d = max(b.chi2 - w.chi2, 0.0)
-        return VariogramRead(w.gap, _gap_p(w.chi2, w.dof), d / max(b.chi2 - b.dof, d, 1e-300), b.gap)
+        return VariogramRead(w.gap, _gap_p(w.chi2, w.dof), d / max(b.chi2 - b.dof, d, 1e-300), b.gap, d)

@@ -54,14 +54,30 @@ class VariogramRead(NamedTuple):
     """A winner and the model before it refitted under the texture's covariance from the variogram.
 
     ``gap`` and ``gap_p`` (``P(χ²_dof ≥ χ²)``) of the model with the winner,
-    the fraction of the excess it ``explained``, and ``gap_before``, the
-    model without it (:mod:`wardjax.effects._recheck`).
+    the fraction of the excess it ``explained``, ``gap_before``, the
+    model without it, and ``delta_chi2``, what the winner lowers χ² by there
+    (:mod:`wardjax.effects._recheck`).
     """
 
     gap: float
     gap_p: float
     explained: float
     gap_before: float
+    delta_chi2: float = math.nan
+
+    def names(self, k: int, ln_n: float, design_effect: float, min_explained: float, structure_p: float) -> bool:
+        """Whether this reading lets a questioned winner (``k`` parameters) be named.
+
+        Only if the winner pays for its parameters under this covariance too,
+        ``Δχ²/D − k ln N > 0`` (``D`` its design effect), *and* it explains at least
+        ``min_explained`` of the excess or leaves a gap within the noise
+        (``gap_p ≥ structure_p``). A gap within the noise alone is not enough:
+        where the model without the winner is within the noise as well, the
+        winner "explains" an excess that is not there (an effect that lowers χ²
+        by nothing would pass).
+        """
+        pays = self.delta_chi2 / max(design_effect, 1.0) - k * ln_n > 0
+        return bool(pays and (self.explained >= min_explained or self.gap_p >= structure_p))
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
