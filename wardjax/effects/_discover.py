@@ -69,6 +69,7 @@ from typing import NamedTuple
 import jax
 import jax.numpy as jnp
 import numpy as np
+from threadpoolctl import threadpool_limits
 
 from ._effect import Effect, Param
 from ._evidence import _NOISE_Z, _dominant_first, _gap_p, _lr_p, _within_noise
@@ -577,6 +578,10 @@ def _with_holdout(search: _Search, levels: dict | None = None) -> _Search:
     return search
 
 
+# NumPy's linear algebra here is on many small matrices (a Cholesky of (C N)² per scanline, NNLS on a few
+# columns): BLAS threads cost more in hand-over than they save, and on a busy machine their spinning made the
+# texture's covariance 20× slower in wall time. JAX keeps its own threads.
+@threadpool_limits.wrap(limits=1, user_api="blas")
 def discover(
     model,
     data,

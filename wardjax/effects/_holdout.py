@@ -112,8 +112,18 @@ class Holdout:
 
     @staticmethod
     def _chi2_at(search, st: FitState, u) -> float:
-        """χ² of ``search``'s data at the parameters ``u`` with ``st``'s effects on (nothing refitted but ρd)."""
-        return float(search.fit([(u, [], st.active)])[0][1])
+        """χ² of ``search``'s data at the parameters ``u`` with ``st``'s effects on (nothing refitted but ρd).
+
+        One evaluation of the residuals (the run's residual program; ρd is profiled in closed form), not a
+        solve with nothing free: the values' whitened residuals and the scanline levels' ``P ℓ``, ``ℓ = ρd a``.
+        """
+        view = search.residual_view(dataclasses.replace(st, u=np.asarray(u)))
+        chi2 = float(np.sum(view.r**2))
+        levels = search.data.levels
+        if levels is not None and view.rho is not None:
+            P, a = (np.asarray(x) for x in levels)
+            chi2 += float(np.sum((P @ (view.rho[:, 0, :] @ a)) ** 2))
+        return chi2
 
     @staticmethod
     def _train(search, st: FitState, anchor):
