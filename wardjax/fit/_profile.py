@@ -142,17 +142,12 @@ def profile_flagged(prepared: _varpro.Prepared, sol: _varpro.ScanlineSolution, l
     Up to ``lanes`` pending rows (a static count) are compacted into that many lanes
     (``jnp.nonzero`` with a static size), profiled there and scattered back: ``sol.cov``
     rescaled by :func:`rescale`, ``nonlinear`` set to :data:`PROFILED` (0 where the profile gave
-    no usable σ). The cost is ``lanes // 2`` rows' profiles where that many hold the chunk's pending
-    rows, else ``lanes`` rows', whatever the chunk's size, and nothing in a chunk with no pending row
-    (a ``lax.switch``). Rows past the lanes stay :data:`PENDING` for the caller to profile apart.
+    no usable σ). The cost is ``lanes`` rows' profiles, whatever the chunk's size, and nothing in
+    a chunk with no pending row (a ``lax.cond``). Rows past the lanes stay :data:`PENDING` for
+    the caller to profile apart.
     """
-    count = jnp.sum((sol.nonlinear == PENDING).astype(jnp.int32))
-    half = max(lanes // 2, 1)
-    branches = [lambda p, s: s, functools.partial(_profile_lanes, lanes=half)]
-    if lanes > half:
-        branches.append(functools.partial(_profile_lanes, lanes=lanes))
-    which = jnp.where(count == 0, 0, jnp.where(count <= half, 1, len(branches) - 1))
-    return jax.lax.switch(which, branches, prepared, sol)
+    pending = jnp.any(sol.nonlinear == PENDING)
+    return jax.lax.cond(pending, functools.partial(_profile_lanes, lanes=lanes), lambda p, s: s, prepared, sol)
 
 
 def _profile_lanes(prepared, sol, *, lanes: int):
