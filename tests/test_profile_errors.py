@@ -216,3 +216,56 @@ def test_profiles_in_the_search_program_equal_the_separate_pass(narrow_tail):
     done = np.sum(sol.nonlinear == _profile.PROFILED)
     assert done == min(rows.sum(), _scanline._profile_lanes(64, 256))
     assert done + np.sum(sol.nonlinear == _profile.PENDING) >= rows.sum()
+
+
+def _check_reference(f, wi, wo, w, sol_row):
+    """The curvature check's verdict by brute force (NumPy least squares at fixed α, and ρs):
+    ``(fails, margin)``, ``margin`` the smallest distance of a relative miss from the tolerance."""
+    a_hat, s_hat = float(sol_row["alpha"]), float(sol_row["rho_s"])
+    cov, chi_min, scale = sol_row["cov_gn"], float(sol_row["chi2"]), float(sol_row["scale"])
+    sd_t, sd_s = np.sqrt(cov[4, 4]) / a_hat, np.sqrt(cov[3, 3])
+    r = np.clip(cov[3, 4] / np.sqrt(cov[3, 3] * cov[4, 4]), -0.999, 0.999)
+    kappa = np.tanh(2 * sd_t)
+    misses = []
+    # the two points, symmetric in 1/α²: 1/α'² = (1 ∓ κ)/α̂², θ' = θ̂ ± σ_θ + ½ log cosh 2σ_θ
+    for sign, delta in ((1.0, -0.5 * np.log1p(-kappa)), (-1.0, 0.5 * np.log1p(kappa))):
+        a = a_hat * np.exp(sign * delta)
+        z = delta / sd_t
+        rise = (_chi2_fixed(f, wi, wo, w, a) - chi_min) / scale
+        misses.append(abs(rise - z * z) / (z * z))
+        s_new = max(s_hat + sign * np.sign(r) * z * sd_s, 0.0)
+        rise = (_chi2_fixed(f, wi, wo, w, a, s_new) - chi_min) / scale
+        pred = 2 * z * z / (1 + abs(r))
+        misses.append(abs(rise - pred) / pred)
+    misses = np.array(misses)
+    return bool(np.any(misses > 0.2)), float(np.min(np.abs(misses - 0.2)))
+
+
+def test_curvature_check_matches_brute_force_chi2(narrow_tail):
+    """The search program's curvature check (χ² at its two points from the search's own exponential)
+    gives the verdict that brute-force χ² at those points gives, on narrow lobes seen in the tail and on
+    broad ones: a few hundred rows, both verdicts present."""
+    from wardjax.fit import _data, _scanline
+
+    rng = np.random.default_rng(7)
+    sets = [narrow_tail[1:]]
+    sets += [blind_scanlines(rng, 64, rng_range, span=(1.5, 8.0))[1:] for rng_range in ((0.03, 0.3), (0.01, 0.05))]
+    sets += [blind_scanlines(rng, 64, (0.03, 0.3), span=(1.5, 8.0))[1:]]
+    agree = fails = passes = 0
+    for f, wi, wo, sigma in sets:
+        w = 1 / sigma**2
+        data = _data.validate(f, wi, wo, None, w)
+        sol = _scanline._solve(
+            data, iso=True, normalization="ward1992", solver="fast", dtype=np.dtype(np.float64), chunk=1024
+        )
+        for i in np.flatnonzero(sol.status == wj.Status.CONVERGED):
+            row = dict(alpha=sol.alpha[i, 0], rho_s=sol.rho_s[i], cov_gn=sol.cov_gn[i], chi2=sol.chi2[i])
+            row["scale"] = sol.chi2[i] / sol.dof[i]
+            ref, margin = _check_reference(f[i], wi[i], wo[i], w[i], row)
+            if margin < 0.02:  # on the tolerance's edge: rounding may decide either way
+                continue
+            agree += ref == (sol.nonlinear[i] != 0)
+            fails += ref
+            passes += not ref
+    assert fails >= 10 and passes >= 50
+    assert agree == fails + passes

@@ -42,6 +42,7 @@ import jax.numpy as jnp
 from jaxtyping import Array, Float, Int
 
 from .._status import Status
+from ._sandwich import sandwich_covariance
 
 # Search range of α. Below 1e-4 no camera resolves a lobe; above 2 the lobe is
 # flat over the hemisphere and α no longer has a meaning.
@@ -63,11 +64,6 @@ MAX_REL_SIGMA = 1.0
 # The Gauss–Newton covariance is trusted where the profiled χ² one standard error
 # from the optimum rises by 1 ± CURVATURE_TOL residual variances, as a quadratic would.
 CURVATURE_TOL = 0.2
-# The sandwich's leverage correction divides by 1 − h; a value with h → 1 has a residual → 0.
-LEVERAGE_FLOOR = 1e-6
-# Up to this many samples (a static shape) the sandwich is HC3; above it HC0: the mean leverage
-# P / (3N) is then under 3 %, and the per-value leverage made this pass six times dearer at N = 256.
-LEVERAGE_SAMPLES = 64
 
 
 class Stats(NamedTuple):
@@ -245,7 +241,17 @@ def grid_chi2(theta, p: Prepared):
     return _profile(bsum, qsum, psum, p.grid_wsum, p.grid_fsum, p.mult, 0.0)[1]
 
 
-def stats(theta, p: Prepared, iso: bool, with_jac: bool = True) -> Stats:
+def lobe_exp(theta, p: Prepared, iso: bool):
+    """``(e, q)`` at ``θ``: ``e = exp(−t/α²)`` (N,) (or ``exp(−u/αx² − v/αy²)``), ``q = 1/(αx αy)``; ``b = g e q``."""
+    if iso:
+        inv = jnp.exp(-2.0 * theta[0])
+        return jnp.exp(-p.x[0] * inv), inv
+    ix = jnp.exp(-2.0 * theta[0])
+    iy = jnp.exp(-2.0 * theta[1])
+    return jnp.exp(-(p.x[0] * ix + p.x[1] * iy)), jnp.exp(-theta[0] - theta[1])
+
+
+def stats(theta, p: Prepared, iso: bool, with_jac: bool = True, e=None) -> Stats:
     """Profiled χ², ``s`` and the Kaufman normal equations at ``θ``.
 
     One exponential per sample, then weighted sums of the streams of
@@ -257,17 +263,12 @@ def stats(theta, p: Prepared, iso: bool, with_jac: bool = True) -> Stats:
     :func:`_profile`).
     """
     k = 1 if iso else 2
-    if iso:
-        inv = jnp.exp(-2.0 * theta[0])
-        t = p.x[0]
-        e = jnp.exp(-t * inv)
-        q = inv
+    inv = ix = jnp.exp(-2.0 * theta[0])
+    iy = inv if iso else jnp.exp(-2.0 * theta[1])
+    if e is None:  # else the caller's lobe_exp(θ), which it holds
+        e, q = lobe_exp(theta, p, iso)
     else:
-        ix = jnp.exp(-2.0 * theta[0])
-        iy = jnp.exp(-2.0 * theta[1])
-        u, v = p.x[0], p.x[1]
-        e = jnp.exp(-(u * ix + v * iy))
-        q = jnp.exp(-theta[0] - theta[1])
+        q = inv if iso else jnp.exp(-theta[0] - theta[1])
     # The barrier makes XLA compute e once, in its own vectorised loop,
     # instead of re-deriving it inside every sum that reads it; the sums are
     # dot products, which XLA:CPU vectorises (a fused multiply-reduce runs as
@@ -370,7 +371,8 @@ def grid_start(p: Prepared) -> Array:
 
 
 def lm(theta0, p: Prepared, iso: bool, steps: int, rtol: float):
-    """``steps`` Levenberg–Marquardt iterations on the reduced problem.
+    """``steps`` Levenberg–Marquardt iterations on the reduced problem: ``(θ, Stats, e)`` at the last
+    accepted point, ``e`` its :func:`lobe_exp` (for the checks after the search).
 
     Marquardt's scaling (``λ diag(JᵀJ)``), ``λ`` divided by 3 on success and
     multiplied by 10 on failure. A step is accepted when it lowers χ² by more
@@ -381,25 +383,26 @@ def lm(theta0, p: Prepared, iso: bool, steps: int, rtol: float):
     tiny = jnp.finfo(theta0.dtype).tiny
 
     def body(_, carry):
-        theta, st, lam = carry
+        theta, st, e, lam = carry
         h = st.jtj + lam * jnp.diag(jnp.diag(st.jtj)) + tiny * jnp.eye(theta.shape[0], dtype=theta.dtype)
         step = -_solve_small(h, st.jtr)
         trial = jnp.clip(theta + step, lo, hi)
-        st_new = stats(trial, p, iso)
+        e_new = lobe_exp(trial, p, iso)[0]
+        st_new = stats(trial, p, iso, e=e_new)
         ok = jnp.isfinite(st_new.chi2) & (st_new.chi2 < st.chi2 + rtol * p.k0)
         ok = ok & jnp.any(trial != theta)
         theta = jnp.where(ok, trial, theta)
-        st = jax.tree_util.tree_map(lambda a, b: jnp.where(ok, a, b), st_new, st)
+        st, e = jax.tree_util.tree_map(lambda a, b: jnp.where(ok, a, b), (st_new, e_new), (st, e))
         lam = jnp.where(ok, jnp.maximum(lam / 3.0, 1e-12), jnp.minimum(lam * 10.0, 1e12))
-        return theta, st, lam
+        return theta, st, e, lam
 
-    carry = (theta0, stats(theta0, p, iso), jnp.asarray(1e-3, theta0.dtype))
+    e0 = lobe_exp(theta0, p, iso)[0]
+    carry = (theta0, stats(theta0, p, iso, e=e0), e0, jnp.asarray(1e-3, theta0.dtype))
     # A fixed number of steps in a loop, not unrolled: unrolled, XLA:CPU fused
     # the chain of accept/reject selects into every later step and re-evaluated
     # the whole history each time (anisotropic search 2-3.5x slower, iso equal).
-    carry = jax.lax.fori_loop(0, steps, body, carry)
-    theta, st, _ = carry
-    return theta, st
+    theta, st, e, _ = jax.lax.fori_loop(0, steps, body, carry)
+    return theta, st, e
 
 
 class ScanlineSolution(NamedTuple):
@@ -463,19 +466,24 @@ def covariance(theta, st: Stats, p: Prepared, scale):
     return cov * scale
 
 
-def curvature_check(theta, chi2, s_hat, p: Prepared, cov, scale):
+def curvature_check(theta, chi2, s_hat, p: Prepared, cov, scale, e):
     """Is the Gauss–Newton covariance trustworthy here? ``1`` where it is not (isotropic fits).
 
-    Two evaluations of :func:`stats` without derivatives, at ``θ± = θ̂ ± σ_θ``. At a fixed
-    roughness the model is linear in ρd and ρs, so each gives the exact χ² there for *every*
-    ``ρs`` (``χ²(θ, s) = K₀ − 2 s ⟨b̃, f̃⟩ + s² ⟨b̃, b̃⟩``, ρd profiled out). The Gauss–Newton
-    covariance predicts, in units of the residual variance ``χ²/dof`` and in standardised
-    coordinates ``(z_s, z_θ)`` with correlation ``r``,
-    ``Δχ²(z_s, z_θ) = (z_s² − 2 r z_s z_θ + z_θ²) / (1 − r²)``. Checked:
+    Two evaluations of :func:`stats` without derivatives, about one standard error either side of
+    the optimum. At a fixed roughness the model is linear in ρd and ρs, so each gives the exact χ²
+    there for *every* ``ρs`` (``χ²(θ, s) = K₀ − 2 s ⟨b̃, f̃⟩ + s² ⟨b̃, b̃⟩``, ρd profiled out). The
+    Gauss–Newton covariance predicts, in units of the residual variance ``χ²/dof`` and in
+    standardised coordinates ``(z_s, z_θ)`` with correlation ``r``,
+    ``Δχ²(z_s, z_θ) = (z_s² − 2 r z_s z_θ + z_θ²) / (1 − r²)``. Checked at each point ``z_θ``:
 
-    * α: the profile over ρs at ``θ±`` (``min_s``, exact by variable projection) rises by 1;
-    * ρs: at the corners ``(z_s, z_θ) = ±(1, sign r)``, nearest the ρs profile's path
-      (which passes ``(±1, ±r)``), χ² rises by ``2 / (1 + |r|)``.
+    * α: the profile over ρs (``min_s``, exact by variable projection) rises by ``z_θ²``;
+    * ρs: at the corner ``z_s = sign(r) z_θ``, nearest the ρs profile's path (which passes
+      ``(±1, ±r)``), χ² rises by ``2 z_θ² / (1 + |r|)``.
+
+    The points are symmetric in ``1/α²``: ``1/α'² = (1 ± κ)/α̂²`` with ``κ = tanh 2σ_θ``, i.e.
+    ``θ' = θ̂ ± σ_θ + ½ log cosh 2σ_θ`` (``θ̂ ± σ_θ`` to second order in ``σ_θ``). Then the lobe's
+    exponentials there are ``e d`` and ``e / d`` with ``d = exp(−κ t/α̂²)`` and ``e`` the search's
+    own exponential at the optimum: one exponential per sample for both points.
 
     The check fails when any of the four rises differs from its prediction by more than
     ``CURVATURE_TOL`` times the prediction (widened by the rounding allowance
@@ -493,101 +501,28 @@ def curvature_check(theta, chi2, s_hat, p: Prepared, cov, scale):
     r = jnp.clip(jnp.where(den > 0, cov_sa / jnp.where(den > 0, den, 1.0), 0.0), -0.999, 0.999)
     corner = 2.0 / (1.0 + jnp.abs(r))
     sign_r = jnp.where(r < 0, -1.0, 1.0)
+    kappa = jnp.tanh(2.0 * sd_t)
+    inv = jnp.exp(-2.0 * theta[0])
+    d = jnp.exp(-kappa * inv * p.x[0])
+    # Where d underflows (κ t/α² > 700) so does e: that sample's lobe is nil at both points.
+    ends = ((1.0, -0.5 * jnp.log1p(-kappa), jnp.where(d > 0, e / jnp.where(d > 0, d, 1.0), 0.0)),)
+    ends += ((-1.0, 0.5 * jnp.log1p(kappa), e * d),)
     rises, predicted = [], []
-    for sign in (1.0, -1.0):
-        st_t = stats(theta + sign * sd_t, p, True, with_jac=False)
+    for sign, delta, e_t in ends:
+        z = delta / jnp.where(sd_t > 0, sd_t, 1.0)
+        st_t = stats(theta + sign * delta, p, True, with_jac=False, e=e_t)
         rises.append((st_t.chi2 - chi2) / scale)
-        predicted.append(jnp.ones_like(corner))
-        s_new = jnp.maximum(s_hat + sign * sign_r * sd_s, 0.0)
+        predicted.append(z * z)
+        s_new = jnp.maximum(s_hat + sign * sign_r * z * sd_s, 0.0)
         chi = p.k0 - 2.0 * s_new * st_t.sbf + s_new * s_new * st_t.sbb
         rises.append((chi - chi2) / scale)
-        predicted.append(corner)
+        predicted.append(corner * z * z)
     rises, predicted = jnp.stack(rises), jnp.stack(predicted)
     # χ² differences round at ε K₀ (the centred sums cancel): no verdict below that. In
     # float64 this is far below the tolerance; in float32 it lets high-signal fits pass.
     rounding = 64.0 * jnp.finfo(scale.dtype).eps * p.k0 / scale
     bad = jnp.any(~(jnp.abs(rises - predicted) <= CURVATURE_TOL * predicted + rounding))
     return bad.astype(jnp.int32)
-
-
-def sandwich_covariance(theta, rho_s, cov, scale, f, u, v, g, w, mean=None):
-    """Heteroscedasticity-consistent (sandwich, HC3) covariance of ``(ρd RGB, ρs, α…)``.
-
-    ``Σ_HC = B⁻¹ (Σ_i w_i² r_i² / (1 − h_i)² · J_iᵀ J_i) B⁻¹`` (White 1980; the leverage
-    correction HC3 of MacKinnon & White 1985) with ``B⁻¹ = cov / (χ²/dof)`` the unscaled
-    Gauss–Newton covariance, ``r_i`` the residual, ``J_i`` the gradient of the model at
-    observation ``i`` (``∂/∂ρd_c = δ/π``, ``∂/∂ρs = b``, ``∂/∂α_k = ρs b ∂log b/∂log α_k / α_k``)
-    and ``h_i = w_i J_i B⁻¹ J_iᵀ`` its leverage. It needs no noise model: it holds when the
-    residual variance changes along the scanline (photon noise grows with the signal),
-    where ``B⁻¹ χ²/dof`` assumes one variance for all samples. The leverage correction
-    matters where there are few observations per parameter (a pixel in 9 photographs:
-    27 values for 5 parameters, where the plain sandwich, HC0, is 20–30 % too small); it is
-    applied up to :data:`LEVERAGE_SAMPLES` samples, above which HC0 is reported (over a
-    scanline of 256 samples the two differ by well under 1 %). One pass over the samples
-    at the optimum ``θ`` (log α, or log αx, log αy) and ``ρs``: ``f`` (3, N), ``u, v, g``
-    (N,), ``w`` (C, N) as the kernel's geometry stage leaves them (sample axis last,
-    weight 0 where a value is unusable). ``mean`` (3,), optional: the weighted mean of
-    ``f − ρs b`` per channel (``ρd/π``), where the search already holds it; without it one
-    more pass over the samples forms it. Returns (P, P).
-    """
-    k = theta.shape[0]
-    n = g.shape[0]
-    alpha = jnp.exp(theta)
-    if k == 1:
-        inv = jnp.exp(-2.0 * theta[0])
-        t = u + v
-        b = g * jnp.exp(-t * inv) * inv
-        dlog = (2.0 * t * inv - 2.0)[None, :]  # (1, N) ∂log b/∂log α
-    else:
-        ix, iy = jnp.exp(-2.0 * theta[0]), jnp.exp(-2.0 * theta[1])
-        b = g * jnp.exp(-(u * ix + v * iy) - theta[0] - theta[1])
-        dlog = jnp.stack([2.0 * u * ix - 1.0, 2.0 * v * iy - 1.0])  # (2, N)
-    ww = jnp.broadcast_to(w, (3, n))
-    spec = rho_s * b
-    resid = f - spec[None, :]
-    if mean is None:
-        # ρd per channel at this (θ, ρs) solves its normal equation: the weighted mean of f − ρs b.
-        wsum = jnp.where(ww.sum(-1) > 0, ww.sum(-1), 1.0)
-        mean = jnp.sum(ww * resid, axis=-1) / wsum
-    resid = resid - mean[:, None]  # (3, N)
-    # J per observation: one-hot ρd_c / π, then b, then ρs b ∂log b/∂log α_k / α_k.
-    jl = [b] + [spec * dlog[i] / alpha[i] for i in range(k)]  # 1+k of (N,)
-    bread = cov / jnp.where(scale > 0, scale, 1.0)
-    r2 = (ww * resid) ** 2  # (3, N)
-    if n <= LEVERAGE_SAMPLES:
-        # Leverage h = w J B⁻¹ Jᵀ per observation, from the ρd (one-hot/π) and lobe (jl) parts of J.
-        cross = sum(bread[:3, 3 + i, None] * jl[i][None, :] for i in range(1 + k))  # (3, N)
-        quad = sum(bread[3 + i, 3 + j] * jl[i] * jl[j] for i in range(1 + k) for j in range(1 + k))  # (N,)
-        lev = ww * (jnp.diagonal(bread)[:3, None] / jnp.pi**2 + (2.0 / jnp.pi) * cross + jnp.asarray(quad)[None, :])
-        # A value with leverage 1 has residual 0: the floor only keeps 0/0 away.
-        r2 = r2 / jnp.maximum(1.0 - lev, LEVERAGE_FLOOR) ** 2
-    r2c = [r2[c] for c in range(3)]
-    r2tot = r2c[0] + r2c[1] + r2c[2]
-    pairs = [(i, j) for i in range(1 + k) for j in range(i, 1 + k)]
-    terms = r2c + [r2c[c] * jl[i] for c in range(3) for i in range(1 + k)] + [jl[i] * jl[j] * r2tot for i, j in pairs]
-    # All sums over samples in one variadic reduction: one loop reads the samples once and keeps an
-    # accumulator per sum. Measured on 1,024 scanlines of 256 samples: 6 ms, against 18 ms for the
-    # same sums as a mat-vec against ones of the materialised products (25 MB of memory traffic)
-    # and 12–15 ms as separate reductions (each re-reading the samples).
-    sums = _sum_samples(terms)
-    dd = jnp.diag(jnp.stack(sums[:3])) / jnp.pi**2
-    dl = jnp.stack(sums[3 : 3 + 3 * (1 + k)]).reshape(3, 1 + k) / jnp.pi
-    vals = dict(zip(pairs, sums[3 + 3 * (1 + k) :]))
-    ll = jnp.stack([jnp.stack([vals[min(i, j), max(i, j)] for j in range(1 + k)]) for i in range(1 + k)])
-    meat = jnp.block([[dd, dl], [dl.T, ll]])
-    return _matmul(_matmul(bread, meat), bread)
-
-
-def _sum_samples(terms):
-    """``[Σ_n x[n] for x in terms]`` of equally shaped ``(N,)`` arrays as one variadic reduction."""
-    zeros = tuple(jnp.zeros((), x.dtype) for x in terms)
-    return jax.lax.reduce(tuple(terms), zeros, lambda a, b: tuple(x + y for x, y in zip(a, b)), (0,))
-
-
-def _matmul(a, b):
-    """``a @ b`` of two small matrices as a broadcast product and sum: under ``vmap`` an elementwise
-    loop over the batch, where a batched matmul of 5×5 matrices runs one member at a time on XLA:CPU."""
-    return jnp.sum(a[:, :, None] * b[None, :, :], axis=1)
 
 
 def solve_scanline(
@@ -605,11 +540,11 @@ def solve_scanline(
     n_steps = ISO_STEPS if steps is None else steps
     theta = grid_start(p)
     if iso:
-        theta, st = lm(theta, p, True, n_steps, rtol)
+        theta, st, e = lm(theta, p, True, n_steps, rtol)
     else:
         # Start from αx = αy at the grid optimum; the 2-D steps move both.
         theta = jnp.concatenate([theta, theta])
-        theta, st = lm(theta, p, False, n_steps + ANISO_STEPS, rtol)
+        theta, st, e = lm(theta, p, False, n_steps + ANISO_STEPS, rtol)
     k = theta.shape[0]
     n_par = 4 + k
     n_samples = p.n_samples
@@ -659,12 +594,12 @@ def solve_scanline(
             jnp.where(at_bound, Status.AT_BOUND, jnp.where(small, Status.CONVERGED, Status.MAX_STEPS)),
         ),
     )
-    nonlinear = curvature_check(theta, st.chi2, s, p, cov, scale) if iso and check else jnp.zeros((), jnp.int32)
+    nonlinear = curvature_check(theta, st.chi2, s, p, cov, scale, e) if iso and check else jnp.zeros((), jnp.int32)
     nonlinear = jnp.where(status == Status.CONVERGED, 2 * nonlinear, 0)  # 2: the profile is pending
     reported = cov
     if raw is not None:
         mean = p.fbar - s * jnp.broadcast_to(st.bbar, (3,))
-        reported = sandwich_covariance(theta, s, cov, scale, *raw, mean=mean)
+        reported = sandwich_covariance(theta, s, cov, scale, *raw, mean=mean, e=e)
     status = status.astype(jnp.int32)
     return ScanlineSolution(rho_d, s, jnp.exp(theta), reported, st.chi2, dof, status, nonlinear, cov)
 
