@@ -36,7 +36,7 @@ from __future__ import annotations
 
 import jax.numpy as jnp
 import numpy as np
-from scipy import fft
+from scipy import fft, sparse
 from scipy.sparse.linalg import LinearOperator, cg
 
 from . import _pixel_model as pm
@@ -49,6 +49,7 @@ MARGIN = 8  # pixels of margin on each axis, where the height wraps round
 _EPS = 1e-4  # the curvature term's weight, over the mean precision
 _RTOL = 1e-10
 _MAX_ITER = 5000
+_DIRECT = 2500  # up to this many heights (the padded grid) the normal equations are solved directly
 
 
 def check_image_shape(image_shape, n_pixels: int) -> tuple[int, int]:
@@ -93,6 +94,21 @@ class _Operators:
     def curvature(self, height: np.ndarray) -> np.ndarray:
         return fft.ifft2(fft.fft2(height) * self.k4).real
 
+    def matrices(self) -> tuple[sparse.csr_array, sparse.csr_array, np.ndarray]:
+        """``D_x``, ``D_y`` ``(P, n)`` (sparse: a pixel's x slope reads its row, its y slope its column) and the
+        curvature term ``(n, n)``, as matrices of the flattened padded heights."""
+        h, w = self.shape
+        hp, wp = self.padded
+
+        def circulant(ik: np.ndarray) -> np.ndarray:  # the derivative of a periodic sequence, as a matrix
+            return fft.ifft(ik[:, None] * fft.fft(np.eye(ik.size), axis=0), axis=0).real
+
+        d_col = sparse.kron(sparse.eye_array(hp), circulant(self.ikc.ravel()), format="csr")
+        d_row = sparse.kron(circulant(self.ikr.ravel()), sparse.eye_array(wp), format="csr")
+        data = (np.arange(hp)[:, None] * wp + np.arange(wp)[None, :])[:h, :w].ravel()
+        curv = fft.ifft2(self.k4[None] * fft.fft2(np.eye(hp * wp).reshape(-1, hp, wp))).real.reshape(hp * wp, -1)
+        return d_col[data], -d_row[data], curv
+
 
 def integrable_slopes(
     slopes: np.ndarray, precision: np.ndarray, image_shape: tuple[int, int], *, margin: int = MARGIN
@@ -120,6 +136,32 @@ def integrable_slopes(
         data = ops.grad_adjoint(np.einsum("...ij,...j->...i", wt, ops.grad(x)))
         return (data + _EPS * ops.curvature(x)).ravel()
 
+    rhs = ops.grad_adjoint(np.einsum("...ij,...j->...i", wt, g)).ravel()
+    if n <= _DIRECT:
+        height = _direct(ops, wt.reshape(-1, 2, 2), rhs)
+    else:
+        height = _iterative(ops, wt, rhs, normal, shape, padded)
+    height = height.reshape(padded)
+    out = ops.grad(height)
+    height = height[: shape[0], : shape[1]]
+    return out.reshape(-1, 2), height - np.mean(height)
+
+
+def _direct(ops: _Operators, wt: np.ndarray, rhs: np.ndarray) -> np.ndarray:
+    """The normal equations assembled and solved (the constant, which no slope sees, pinned at 0)."""
+    dx, dy, curv = ops.matrices()
+
+    def weighted(i: int, j: int) -> sparse.csr_array:
+        return sparse.diags_array(wt[:, i, j]) @ (dx if j == 0 else dy)
+
+    a = dx.T @ (weighted(0, 0) + weighted(0, 1)) + dy.T @ (weighted(1, 0) + weighted(1, 1))
+    a = np.asarray(a.todense()) + _EPS * curv + 1.0 / a.shape[0]  # + 1/n: the constant's row, pinning its mean
+    return np.linalg.solve(a, rhs)
+
+
+def _iterative(ops, wt, rhs, normal, shape, padded) -> np.ndarray:
+    """Conjugate gradients with the FFT operators, preconditioned by the Fourier-diagonal part."""
+    n = padded[0] * padded[1]
     share = shape[0] * shape[1] / n  # the data cover this share of the padded grid
     diag = share * (np.abs(ops.ikr) ** 2 + np.abs(ops.ikc) ** 2) + _EPS * ops.k4
     diag[0, 0] = 1.0  # the constant: no slope sees it
@@ -127,14 +169,10 @@ def integrable_slopes(
     def precondition(x: np.ndarray) -> np.ndarray:
         return fft.ifft2(fft.fft2(x.reshape(padded)) / diag).real.ravel()
 
-    rhs = ops.grad_adjoint(np.einsum("...ij,...j->...i", wt, g)).ravel()
     op = LinearOperator((n, n), matvec=normal, dtype=np.float64)  # pyright: ignore[reportCallIssue]
     pre = LinearOperator((n, n), matvec=precondition, dtype=np.float64)  # pyright: ignore[reportCallIssue]
     height, _ = cg(op, rhs, rtol=_RTOL, maxiter=_MAX_ITER, M=pre)
-    height = height.reshape(padded)
-    out = ops.grad(height)
-    height = height[: shape[0], : shape[1]]
-    return out.reshape(-1, 2), height - np.mean(height)
+    return height
 
 
 def on_height_field(theta, s, labels, normal_map, data, t, normalization, shape):
