@@ -120,11 +120,8 @@ def fit_state(
     held = getattr(getattr(normals_from, "pixel", None), "normals", None)
     res = _pixel_fit(data, gains(data, shared.effects), keep, state.lobe, state.normals, held)
     chi2 = float(res.chi2)
-    n_held = (
-        2 * int(getattr(normals_from.pixel, "evidence", {}).get("normals", {}).get("n_pixels", 0))
-        if held is not None
-        else 0
-    )
+    ev = getattr(getattr(normals_from, "pixel", None), "evidence", {})
+    n_held = 2 * int(ev.get("normals", {}).get("n_pixels", 0)) if held is not None else 0  # the held normals
     return StateFit(chi2, max(int(res.dof) - state.n_radial - n_held, 1), shared, res)
 
 

@@ -22,9 +22,10 @@ each direction, the margin holding no data, so that the height can wrap
 round smoothly there (mirroring the image instead forces ``∂h/∂n = 0`` at its
 edges). The small curvature term (``ε`` = 10⁻⁴ of the mean precision) fixes
 the margin's heights; on the data it changes a slope of 8 pixels' period by
-under 10⁻⁴ of itself. The normal equations are solved by conjugate gradients
-(:func:`scipy.sparse.linalg.cg`, FFTs of :mod:`scipy.fft`), preconditioned by
-their Fourier-diagonal part; ``h`` is known up to a constant.
+under 10⁻⁴ of itself. Up to :data:`_DIRECT` heights the normal equations are
+assembled (:mod:`scipy.sparse`) and solved directly; above, by conjugate
+gradients (:func:`scipy.sparse.linalg.cg`, FFTs of :mod:`numpy.fft`),
+preconditioned by their Fourier-diagonal part. ``h`` is known up to a constant.
 
 Heights are in units of the pixel pitch (square pixels); rows run along
 ``−y`` and columns along ``+x`` (the rectified layout of
@@ -36,7 +37,8 @@ from __future__ import annotations
 
 import jax.numpy as jnp
 import numpy as np
-from scipy import fft, sparse
+from numpy import fft
+from scipy import sparse
 from scipy.sparse.linalg import LinearOperator, cg
 
 from . import _pixel_model as pm
@@ -94,7 +96,7 @@ class _Operators:
     def curvature(self, height: np.ndarray) -> np.ndarray:
         return fft.ifft2(fft.fft2(height) * self.k4).real
 
-    def matrices(self) -> tuple[sparse.csr_array, sparse.csr_array, np.ndarray]:
+    def matrices(self) -> tuple:
         """``D_x``, ``D_y`` ``(P, n)`` (sparse: a pixel's x slope reads its row, its y slope its column) and the
         curvature term ``(n, n)``, as matrices of the flattened padded heights."""
         h, w = self.shape
