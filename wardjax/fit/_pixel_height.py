@@ -182,7 +182,7 @@ def on_height_field(theta, s, labels, normal_map, data, t, normalization, shape)
     the nearest height field, weighted by their precision (:mod:`._pixel_height`); the lobes refitted there.
 
     Returns ``theta``, ``s``, the normal map, the geometry, the ``(a, g)`` covariances of the pixels' own
-    fits (an upper bound on the projected slopes' uncertainty) and the slopes' RMS move.
+    fits (an upper bound on the projected slopes' uncertainty), and the χ² after and the slopes' RMS move.
     """
     f, w, wi, wo = data
     c = f.shape[-1]
@@ -191,8 +191,17 @@ def on_height_field(theta, s, labels, normal_map, data, t, normalization, shape)
     )
     cov_g = np.asarray(cov[:, c:, c:])
     cov_g = np.where(np.all(np.isfinite(cov_g), (1, 2))[:, None, None], cov_g, 0.0)
-    g_star, _ = integrable_slopes(np.asarray(g), np.linalg.pinv(cov_g), shape)
+    g = np.asarray(g)
+    g_star, _ = integrable_slopes(g, np.linalg.pinv(cov_g), shape)
     normal_map = normal_from_slopes(jnp.asarray(g_star))
     geom = pm.geometry(wi, wo, normal_map, t, normalization)
     theta, s, _ = pm.lobe_fit(theta, labels, geom, f, w, n_lobes=int(theta.shape[0]), steps=STEPS)
-    return theta, s, normal_map, geom, cov, float(np.sqrt(np.mean((g_star - np.asarray(g)) ** 2)))
+    chi2 = float(jnp.sum(pm.pixel_chi2(theta, s, labels, geom, f, w)))
+    return (
+        theta,
+        s,
+        normal_map,
+        geom,
+        cov,
+        {"chi2": chi2, "slopes_moved_rms": float(np.sqrt(np.mean((g_star - g) ** 2)))},
+    )

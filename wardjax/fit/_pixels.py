@@ -600,12 +600,9 @@ def _fit(f, wi, wo, w, t, opts: _Options) -> PixelFit:
             "delta_bic": before - after - 2 * n_keep * ln_n,
         }
         if opts.shape is not None:
-            theta, s, normal_map, geom, cov_ag, moved = on_height_field(
-                theta, s, labels, normal_map, data, t, normalization, opts.shape
-            )
-            chi2_h = float(jnp.sum(_pixel_chi2(theta, s, labels, geom, f, w)))
-            evidence["normals"]["height_field"] = {"delta_chi2": before - chi2_h, "slopes_moved_rms": moved}
-
+            extra = (normalization, opts.shape)
+            theta, s, normal_map, geom, cov_ag, ev = on_height_field(theta, s, labels, normal_map, data, t, *extra)
+            evidence["normals"]["height_field"] = {"delta_chi2": before - ev.pop("chi2"), **ev}
     (a, inv_sq), (cov_lobe, var_a), pix_chi2 = _outputs(theta, s, labels, geom, f, w, n_lobes=n_lobes)
     slopes_var = None
     if normals and cov_ag is not None:
@@ -614,8 +611,8 @@ def _fit(f, wi, wo, w, t, opts: _Options) -> PixelFit:
         cov_lobe = _lobe_covariance_with_normals(a, theta, s, labels, normal_map, data, t, normalization)
     chi2 = float(jnp.sum(pix_chi2))
     valid_pixels = int(jnp.sum(jnp.any(w > 0, (1, 2))))
-    n_normal_par = (p - 1) if (normals and opts.shape is not None) else 2 * int(jnp.sum(keep))  # heights, or slopes
-    n_par = valid_pixels * c + n_lobes * (1 + d) + n_normal_par
+    heights = normals and opts.shape is not None  # a height per pixel (less the constant), or two slopes per kept one
+    n_par = valid_pixels * c + n_lobes * (1 + d) + ((p - 1) if heights else 2 * int(jnp.sum(keep)))
     dof = max(n_obs - n_par, 1)
     scale = chi2 / dof if unweighted else 1.0
     cov_lobe = np.asarray(cov_lobe) * scale
