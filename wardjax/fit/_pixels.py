@@ -369,7 +369,7 @@ def _flat_slopes_var(normal_map, keep):
     known only as well as the sample's normals vary, not to zero.
     """
     g = _slopes(normal_map)
-    n = jnp.maximum(jnp.sum(keep), 1)
+    n = jnp.maximum(jnp.sum(keep), 1).astype(g.dtype)  # strict promotion: no int64 / float64
     return jnp.diag(jnp.sum(jnp.where(keep[:, None], g * g, 0.0), 0) / n)
 
 
