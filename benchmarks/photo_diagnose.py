@@ -5,6 +5,7 @@ paper's model to the last effect added::
 
     python -m benchmarks.photo_diagnose            # the real photos and the renders
     python -m benchmarks.photo_diagnose --renders  # the renders only
+    python -m benchmarks.photo_diagnose --capture matfusion_pink  # one real photo
 
 The renders are wardjax's forward model of nine flash photos of a flat
 one-material sample (``wardjax.render.flash_views``, no bumps), written in
@@ -103,13 +104,18 @@ def _row(label: str, rep, seconds: float) -> str:
 def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--renders", action="store_true", help="the multiview renders only")
+    ap.add_argument("--capture", help="only the real photo of this name (a folder of tests/data/flash)")
     args = ap.parse_args(argv)
     print("| capture | named | gap per step | verdict | s |\n|---|---|---|---|---|")
     if not args.renders:
         for cap in sorted(p for p in REAL.iterdir() if (p / "capture.toml").is_file()):
+            if args.capture and cap.name != args.capture:
+                continue
             t = time.perf_counter()
             rep = diagnose(cap)
             print(_row(cap.name, rep, time.perf_counter() - t), flush=True)
+    if args.capture:
+        return
     with tempfile.TemporaryDirectory() as tmp:
         for offset in (10.0, 150.0):
             for kind in (None, "vignetting", "flash_falloff"):

@@ -121,3 +121,18 @@ def test_06_a_radial_step_on_a_model_with_structure_is_scored_held_then_refitted
     assert found.fit.pixel is not None and found.fit.chi2 < cur.chi2 - found.chosen.delta_chi2 / 2
     a1, _ = found.fit.shared.effects["vignetting"]
     assert a1 < -0.1  # the hidden 1 − 0.3 r² + 0.05 r⁴: darker at the edge
+
+
+@pytest.mark.slow  # two wj.fit_pixels fits with normals and clusters, compiled in the worker (about 60 s)
+def test_07_lobes_per_cluster_are_scored_at_the_current_normals(vignetted):
+    from wardjax.effects._photo_discover import _normals_held
+
+    state = PhotoState(structural=("normals",))
+    cur = fit_state(state, vignetted)
+    held = _normals_held("varying_specular", state, cur)
+    assert held is cur and _normals_held("vignetting", state, cur) is None
+    new = fit_state(state.plus("varying_specular"), vignetted, start=cur.shared, normals_from=held)
+    np.testing.assert_allclose(new.pixel.normals, cur.pixel.normals, atol=1e-12)  # held, not refitted
+    kept = cur.pixel.evidence["normals"]["n_pixels"]
+    assert new.dof == new.pixel.dof - 2 * kept  # the held normals still counted as parameters
+    assert new.chi2 <= cur.chi2 * (1 + 1e-3)  # lobes per cluster at the same normals fit no worse

@@ -99,7 +99,7 @@ def _candidate(name: str, k: int, dchi2: float, cur: StateFit, chi2_new: float, 
 
 def _score(name: str, state: PhotoState, cur: StateFit, ref: Callable[[], StateFit], data: PhotoData, ln_n: float):
     """The candidate ``name`` on top of ``state``: its :class:`Candidate` and fit."""
-    new = fit_state(state.plus(name), data, start=cur.shared)
+    new = fit_state(state.plus(name), data, start=cur.shared, normals_from=_normals_held(name, state, cur))
     base = ref() if name in STRUCTURAL and cur.pixel is None else cur  # compared on the same fitter's footing
     k = _k(name, new)
     dchi2 = base.chi2 - new.chi2 if k > 0 else 0.0
@@ -107,6 +107,12 @@ def _score(name: str, state: PhotoState, cur: StateFit, ref: Callable[[], StateF
         bic = getattr(new.pixel, "evidence", {})["clusters"]["bic"]
         dchi2 = bic[1] - bic[k // 3 + 1] + k * ln_n
     return _candidate(name, k, dchi2, cur, new.chi2, ln_n), new
+
+
+def _normals_held(name: str, state: PhotoState, cur: StateFit) -> StateFit | None:
+    """The fit whose normals a candidate is scored at: lobes per cluster on a model with normals are fitted
+    at the current normals (refitted in full only if chosen), as radial gains on a held structure."""
+    return cur if name == "varying_specular" and state.normals and cur.pixel is not None else None
 
 
 class _Held(NamedTuple):
@@ -139,14 +145,20 @@ def _halves(state: PhotoState, data: PhotoData, views: bool = False) -> tuple[np
 
 
 def holdout(
-    cur: PhotoState, new: PhotoState, data: PhotoData, dchi2: float, start, held: _Held | None = None
+    cur: PhotoState,
+    new: PhotoState,
+    data: PhotoData,
+    dchi2: float,
+    start,
+    held: _Held | None = None,
+    normals_from: StateFit | None = None,
 ) -> HoldoutRead | None:
     """Both models fitted on each half predict the other; ``None`` where the data have no two halves.
 
     With ``held`` (a radial candidate on a model with structure) the structure stays as fitted to all the
     data and only the gains are fitted on each half (:mod:`._photo_held`); the halves are then alternate
     views, each spanning the image: image halves would ask the gains fitted on one side to make up for
-    the held structure's errors on the other.
+    the held structure's errors on the other. With ``normals_from`` both models are fitted at its normals.
     """
     halves = _halves(new, data, views=held is not None)
     if halves is None:
@@ -159,8 +171,8 @@ def holdout(
             fn = fit_gains_held(new.radial, data, hs, start, train)
             g = chi2_gains_held(fc, cur.radial, data, hs, test) - chi2_gains_held(fn, new.radial, data, hs, test)
         else:
-            fc = fit_state(cur, data, train, start=start, pixels=bool(new.structural))
-            fn = fit_state(new, data, train, start=start)
+            fc = fit_state(cur, data, train, start=start, pixels=bool(new.structural), normals_from=normals_from)
+            fn = fit_state(new, data, train, start=start, normals_from=normals_from)
             g = held_chi2(fc, cur, data, test, train) - held_chi2(fn, new, data, test, train)
         if not math.isfinite(g):
             return None
@@ -324,7 +336,8 @@ def _step(state, cur, remaining, radial_first, data, ln_n, alpha, i, progress) -
                 break
             progress(f"step {i}: hold-out check of {c.effect}")
             on_held = held if c.effect in RADIAL else None
-            hold = holdout(state, state.plus(c.effect), data, c.delta_chi2, cur.shared, on_held)
+            normals_held = _normals_held(c.effect, state, cur)
+            hold = holdout(state, state.plus(c.effect), data, c.delta_chi2, cur.shared, on_held, normals_held)
             c = dataclasses.replace(c, holdout=hold)
             if hold is not None and not hold.passed:
                 partial.append(c)
@@ -333,5 +346,8 @@ def _step(state, cur, remaining, radial_first, data, ln_n, alpha, i, progress) -
             if on_held is not None:
                 progress(f"step {i}: {c.effect} refitted with the structure")
                 fit = fit_state(state.plus(c.effect), data, start=cur.shared, gains_from=fit)
+            elif normals_held is not None:
+                progress(f"step {i}: {c.effect} refitted with its normals")
+                fit = fit_state(state.plus(c.effect), data, start=cur.shared)
             return _Found(c, fit, all_cands, partial)
     return _Found(None, None, all_cands, partial)

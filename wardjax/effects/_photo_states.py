@@ -71,10 +71,22 @@ class StateFit(NamedTuple):
         return self.chi2 / max(self.dof, 1)
 
 
-def _pixel_fit(data: PhotoData, g: np.ndarray, keep: np.ndarray, lobe: str, normals: bool):
+def _pixel_fit(data: PhotoData, g: np.ndarray, keep: np.ndarray, lobe: str, normals: bool, held=None):
+    """:func:`wardjax.fit_pixels` on the views ``keep``; ``held``: normals ``(P, 3)`` to fit at, not refit."""
     from ..fit import fit_pixels
 
     w = data.w * (g * g * keep)[..., None]
+    if normals and held is not None:
+        return fit_pixels(
+            data.f / g[..., None],
+            data.wi,
+            data.wo,
+            weights=w,
+            mask=np.any(w > 0, -1),
+            lobe=lobe,
+            fixed_normals=held,
+            normalization=data.normalization,
+        )
     return fit_pixels(
         data.f / g[..., None],
         data.wi,
@@ -95,17 +107,22 @@ def fit_state(
     start=None,
     pixels: bool = False,
     gains_from: SharedFit | None = None,
+    normals_from: StateFit | None = None,
 ) -> StateFit:
     """Fit ``state`` to the views ``keep (P, V)``; ``pixels``: through :func:`wardjax.fit_pixels` even
     without structure (to compare with a structural candidate on the same footing); ``gains_from``: a fit
-    whose radial gains are taken as they are (fitted on a held structure, :mod:`._photo_held`)."""
+    whose radial gains are taken as they are (fitted on a held structure, :mod:`._photo_held`);
+    ``normals_from``: a fit whose normals are held (``fixed_normals``), not refitted."""
     keep = np.ones(data.radius2.shape, bool) if keep is None else keep
     shared = fit_shared(data, state.radial, keep, start, state.bounded) if gains_from is None else gains_from
     if not (state.structural or pixels):
         return StateFit(shared.chi2, shared.dof, shared, None)
-    res = _pixel_fit(data, gains(data, shared.effects), keep, state.lobe, state.normals)
+    held = getattr(getattr(normals_from, "pixel", None), "normals", None)
+    res = _pixel_fit(data, gains(data, shared.effects), keep, state.lobe, state.normals, held)
     chi2 = float(res.chi2)
-    return StateFit(chi2, max(int(res.dof) - state.n_radial, 1), shared, res)
+    ev = getattr(getattr(normals_from, "pixel", None), "evidence", {})
+    n_held = 2 * int(ev.get("normals", {}).get("n_pixels", 0)) if held is not None else 0  # the held normals
+    return StateFit(chi2, max(int(res.dof) - state.n_radial - n_held, 1), shared, res)
 
 
 def _profiled(f, w, spec, q) -> np.ndarray:

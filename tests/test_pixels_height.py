@@ -1,0 +1,78 @@
+"""Slopes projected onto a height field (wardjax.fit._pixel_height): integrable fields kept, the rest removed.
+
+References: a height given in closed form (not periodic over the image, so
+that the edges are tested) and its exact derivatives; a curl field
+(``∇ × (0, 0, ψ)``), which no height has; and the least-squares identity
+that the projection's residual is orthogonal to every gradient.
+"""
+
+import numpy as np
+import pytest
+
+from wardjax.fit._pixel_height import check_image_shape, integrable_slopes
+
+SHAPE = (16, 20)
+ROWS, COLS = np.mgrid[0 : SHAPE[0], 0 : SHAPE[1]].astype(float)
+
+
+def _height_and_slopes():
+    """``h = 0.5 sin(0.6c + 0.3) cos(0.5r + 1) + 0.002 (c − 5)² + 0.01 r`` and ``(∂h/∂c, −∂h/∂r)``."""
+    h = 0.5 * np.sin(0.6 * COLS + 0.3) * np.cos(0.5 * ROWS + 1) + 0.002 * (COLS - 5) ** 2 + 0.01 * ROWS
+    d_col = 0.3 * np.cos(0.6 * COLS + 0.3) * np.cos(0.5 * ROWS + 1) + 0.004 * (COLS - 5)
+    d_row = -0.25 * np.sin(0.6 * COLS + 0.3) * np.sin(0.5 * ROWS + 1) + 0.01
+    return h, np.stack([d_col, -d_row], -1).reshape(-1, 2)
+
+
+def _eye(n, scale=1.0):
+    return np.broadcast_to(scale * np.eye(2), (n, 2, 2)).copy()
+
+
+def test_a_height_fields_slopes_are_kept_and_its_height_found():
+    h, g = _height_and_slopes()
+    out, height = integrable_slopes(g, _eye(g.shape[0]), SHAPE)
+    assert np.sqrt(np.mean((out - g) ** 2)) < 3e-3 * np.sqrt(np.mean(g**2))  # a finite difference: several %
+    np.testing.assert_allclose(height, h - h.mean(), atol=0.02)  # slopes fix h to O(slope error × size)
+
+
+def test_a_curl_field_is_removed_and_noise_halved():
+    _, g = _height_and_slopes()
+    # ∇ × (0, 0, ψ) = (∂ψ/∂y, −∂ψ/∂x), y = −row, with ψ = 0.5 sin(a) sin(b) nearly 0 on the edges: no height has it
+    a, b = np.pi * (ROWS + 0.5) / SHAPE[0], 2 * np.pi * (COLS + 0.5) / SHAPE[1]
+    psi_r = 0.5 * np.pi / SHAPE[0] * np.cos(a) * np.sin(b)
+    psi_c = 0.5 * 2 * np.pi / SHAPE[1] * np.sin(a) * np.cos(b)
+    curl = np.stack([-psi_r, -psi_c], -1).reshape(-1, 2)
+    out, _ = integrable_slopes(g + curl, _eye(g.shape[0]), SHAPE)
+    assert np.sqrt(np.mean((out - g) ** 2)) < 0.2 * np.sqrt(np.mean(curl**2))
+    # white noise in both slopes: the projection keeps about half its power (one of the two components)
+    noise = 0.02 * np.random.default_rng(0).standard_normal(g.shape)
+    out, _ = integrable_slopes(g + noise, _eye(g.shape[0]), SHAPE)
+    assert 0.6 < np.sqrt(np.mean((out - g) ** 2)) / 0.02 < 0.8
+
+
+def test_precision_weights_and_the_normal_equations():
+    _, g = _height_and_slopes()
+    rng = np.random.default_rng(1)
+    noisy = g + 0.05 * rng.standard_normal(g.shape)
+    prec = _eye(g.shape[0], 1.0)
+    good = rng.random(g.shape[0]) < 0.3  # precise pixels: their slopes are trusted, the others follow them
+    prec[good] *= 1e3
+    noisy[good] = g[good]
+    out, _ = integrable_slopes(noisy, prec, SHAPE)
+    err = np.sqrt(np.mean((out - g)[~good] ** 2))
+    assert err < 0.5 * np.sqrt(np.mean((noisy - g)[~good] ** 2))
+    assert err < 0.7 * np.sqrt(np.mean((integrable_slopes(noisy, _eye(g.shape[0]), SHAPE)[0] - g)[~good] ** 2))
+    # a common scale of the precision changes nothing; NaN slopes count as no information
+    np.testing.assert_allclose(integrable_slopes(noisy, 7.0 * prec, SHAPE)[0], out, atol=1e-8)
+    holed = noisy.copy()
+    holed[~good] = np.nan
+    prec0 = prec.copy()
+    prec0[~good] = 0.0
+    np.testing.assert_allclose(integrable_slopes(holed, prec, SHAPE)[0], integrable_slopes(noisy, prec0, SHAPE)[0])
+
+
+def test_image_shape_checked():
+    assert check_image_shape((4, 5), 20) == (4, 5)
+    with pytest.raises(ValueError, match=r"height_field \(4, 4\) must hold the 20 pixels"):
+        check_image_shape((4, 4), 20)
+    with pytest.raises(ValueError, match="height_field must be the image's"):
+        check_image_shape(7, 20)
