@@ -36,13 +36,10 @@ Evidence: why BIC *and* a boundary-corrected likelihood ratio
     fit on the unphysical side counts as no evidence, and the LR reference is
     the boundary mixture ``½χ²_{k−1} + ½χ²_k`` (Self & Liang 1987). Both
     price the effect against the noise model; where that model is off
-    (correlated noise, misread texture) every Δχ² is inflated alike. So the
-    winner must also predict data it was not fitted to: refitted on one half
-    of the scanlines it must lower χ² on the other (two folds; its held-out
-    gain at least a quarter of its Δχ², :mod:`wardjax.effects._holdout`) —
-    only the winner, once per step, and only on scanline data with 16
-    scanlines or more (on 16 threshold points the folds' noise exceeds the
-    effects).
+    (correlated noise, misread texture) every Δχ² is inflated alike. So the winner must also predict data it
+    was not fitted to: refitted on alternate blocks of scanlines it must lower χ² on the others (its held-out
+    gain at least a quarter of its Δχ², :mod:`wardjax.effects._holdout`) — only the winner, once per step, on
+    scanline data with 16 scanlines or more (on 16 threshold points the folds' noise exceeds the effects).
 
 Guard against confident wrong names
     A library effect that is strongly supported but explains less than ``min_explained`` of the current excess
@@ -88,9 +85,7 @@ from ._verdict import unexplained_structure
 __all__ = ["discover"]
 
 _SOLO_MIN_OBS = 20_000  # from this many residuals on, each fit is solved alone (_fit_batch)
-# An unconverged fit that matters gets up to this many more rounds of lm_steps (_Search.refine): with the
-# default cap of 20 steps, 240 steps in all.
-_REFINE_ROUNDS = 11
+_REFINE_ROUNDS = 11  # more rounds of lm_steps for an unconverged fit that matters (_Search.refine): 240 steps in all
 _AMBIGUOUS_BIC = 6.0  # a confusable runner-up within this ΔBIC of the winner is named too (Kass & Raftery: < 6)
 # effects whose signatures one capture may not tell apart: a lamp field follows image position, anisotropy the
 # half-vector azimuth, the Fresnel rise the incidence angle, and across one capture's scanlines they covary (on
