@@ -132,6 +132,7 @@ def anisotropic_materials(rng, m):
     return ax, ay
 
 
+@pytest.mark.slow  # 20 materials, 20 s; by default the README's example and the anisotropic round trip fit αx ≠ αy
 def test_anisotropy_is_identified_by_the_joint_fit():
     rng = np.random.default_rng(13)
     m, s = 20, 32
