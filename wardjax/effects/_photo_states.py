@@ -76,17 +76,6 @@ def _pixel_fit(data: PhotoData, g: np.ndarray, keep: np.ndarray, lobe: str, norm
     from ..fit import fit_pixels
 
     w = data.w * (g * g * keep)[..., None]
-    if normals and held is not None:
-        return fit_pixels(
-            data.f / g[..., None],
-            data.wi,
-            data.wo,
-            weights=w,
-            mask=np.any(w > 0, -1),
-            lobe=lobe,
-            fixed_normals=held,
-            normalization=data.normalization,
-        )
     return fit_pixels(
         data.f / g[..., None],
         data.wi,
@@ -94,7 +83,8 @@ def _pixel_fit(data: PhotoData, g: np.ndarray, keep: np.ndarray, lobe: str, norm
         weights=w,
         mask=np.any(w > 0, -1),
         lobe=lobe,
-        normals=normals,
+        normals=normals and held is None,
+        fixed_normals=held if normals else None,
         normalization=data.normalization,
     )
 
