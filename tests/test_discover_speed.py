@@ -14,7 +14,7 @@ def _blas_threads() -> list[int]:
 
 
 class _Seen(Exception):
-    pass
+    """Raised by the spy once it has read the thread counts, to stop ``discover`` there."""
 
 
 def test_discover_runs_numpy_linear_algebra_on_one_blas_thread(monkeypatch):
