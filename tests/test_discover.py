@@ -84,11 +84,11 @@ def test_solo_fits_equal_batched_fits(reports, monkeypatch):
     effect is skipped by its ``lax.cond`` (under vmap both branches run and the absent effect is evaluated
     as the identity): this also checks that skipping changes no fit. And the whole run — baseline, every
     candidate of every step, the continued fits — compiles at most one solve program."""
-    from wardjax.effects import _discover, _solve
+    from wardjax.effects import _search, _solve
 
     case, rep = reports["anisotropy"]  # batched: 3,072 residuals < _SOLO_MIN_OBS
-    assert rep.n_obs < _discover._SOLO_MIN_OBS
-    monkeypatch.setattr(_discover, "_SOLO_MIN_OBS", 0)
+    assert rep.n_obs < _search._SOLO_MIN_OBS
+    monkeypatch.setattr(_search, "_SOLO_MIN_OBS", 0)
     n_programs = _solve._solve_batch._cache_size()
     solo = discover(ScanlineModel(), case.data)
     assert len(solo.steps) >= 1 and sum(len(s.candidates) for s in solo.steps) >= 8
@@ -165,7 +165,7 @@ def test_report_renders_and_saves(reports, tmp_path):
     assert set(paths) >= {"json", "md", "gap", "anisotropy"}
     # the residual structure against the telling covariate disappears
     before = rep.steps[0].plot
-    from wardjax.effects._discover import _binned_test
+    from wardjax.effects._structure import _binned_test
 
     assert _binned_test(before["r_before"], before["x_before"])[2] < 1e-6
     assert _binned_test(before["r_after"], before["x_after"])[2] > 1e-4

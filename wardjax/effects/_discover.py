@@ -57,35 +57,28 @@ Guard against confident wrong names
 from __future__ import annotations
 
 import dataclasses
-import functools
-import math
 import time
 from collections.abc import Callable
-from typing import NamedTuple
 
-import jax
-import jax.numpy as jnp
 import numpy as np
 from threadpoolctl import threadpool_limits
 
-from ._effect import Effect, Param
-from ._evidence import _NOISE_Z, _dominant_first, _gap_p, _lr_p, _within_noise
+from ._candidates import _deflated, _rank_candidates, _rechecked
+from ._effect import Effect
+from ._evidence import _NOISE_Z, _gap_p, _lr_p, _within_noise
 from ._holdout import Holdout
 from ._inputs import _check_inputs, _split_library
 from ._recheck import VariogramRecheck
 from ._remeasure import TextureRemeasure
 from ._report import Candidate, DiscoveryReport, FitState, Step
-from ._solve import _cov_full, _fit_batch, _Layout, _residual_view
+from ._search import _Search, _View
 from ._step_record import flat as _flat
 from ._step_record import make_step, plot_sampler
-from ._structure import _binned_test
-from ._texture_term import CrossTexture, identity_whitened, with_texture
+from ._texture_term import identity_whitened, with_texture
 from ._verdict import unexplained_structure
 
 __all__ = ["discover"]
 
-_SOLO_MIN_OBS = 20_000  # from this many residuals on, each fit is solved alone (_fit_batch)
-_REFINE_ROUNDS = 11  # more rounds of lm_steps for an unconverged fit that matters (_Search.refine): 240 steps in all
 _AMBIGUOUS_BIC = 6.0  # a confusable runner-up within this ΔBIC of the winner is named too (Kass & Raftery: < 6)
 # effects whose signatures one capture may not tell apart: a lamp field follows image position, anisotropy the
 # half-vector azimuth, the Fresnel rise the incidence angle, and across one capture's scanlines they covary (on
@@ -98,151 +91,6 @@ _CONFUSABLE = {
     "gamma": ("coloured_specular",),
     "coloured_specular": ("gamma",),
 }
-_REFINE_BIC = 0.5  # ... a runner-up matters if its ΔBIC (a lower bound) is at least this fraction of the winner's
-
-
-class _View(NamedTuple):
-    """A fitted state with what the tests read off it: whitened residuals, prediction and covariates."""
-
-    state: FitState
-    r: np.ndarray
-    pred: np.ndarray
-    covs: dict
-    rho: np.ndarray | None = None  # profiled ρd (S, 1, C) of a scanline model
-
-
-class _Search:
-    """What every fit of one ``discover`` run shares: the problem, the parameter layout and the solver settings.
-
-    All fits of a run go through :meth:`fit` with the same padded width
-    ``k_pad`` and batch width ``b_pad``, so that one compiled program serves
-    the baseline, every candidate and every continuation.
-    """
-
-    def __init__(self, model, data, testable: tuple[Effect, ...], lm_steps: int, chunk: int):
-        self.model, self.data, self.testable = model, data, testable
-        self.lm_steps, self.chunk = lm_steps, chunk
-        self.base = model.base_params(data)
-        self.layout = _Layout(self.base, testable)
-        self.n_obs = int(data.n_obs)
-        self.cross: CrossTexture | None = None  # set when the texture is carried (design effects)
-        self.recheck: VariogramRecheck | None = None  # ... and the guard's second opinion
-        self.holdout: Holdout | None = None  # the winner must predict held-out scanlines
-        self.remeasure: TextureRemeasure | None = None  # the texture measured again after each named effect
-        # whitened by the texture's covariance, an LM step costs far more than a call's overhead: each fit alone
-        # (batched, the baseline's 3 starts ran padded to the step's 16, every one until the slowest converged)
-        self.solo = self.n_obs >= _SOLO_MIN_OBS or getattr(data, "whiten", None) is not None
-        with jax.enable_x64(True):  # on the device once, not once per solve
-            self.data_dev = jax.tree_util.tree_map(jnp.asarray, data)
-        self.n_prof = int(model.n_profiled(data))
-        self.ln_n = math.log(self.n_obs)
-        self.k_pad = len(self.base) + max([len(e.params) for e in testable] + [0]) + 4
-        self.mask = np.asarray(data.mask) if hasattr(data, "mask") else None
-        self.baseline_jobs = _baseline_jobs(self.layout, self.base)
-        n_cand_jobs = sum(len(e.starts()) for e in testable)
-        self.b_pad = max(len(self.baseline_jobs), n_cand_jobs, 1)
-
-    def sibling(self, data) -> _Search:
-        """The same search over other ``data`` of the same shapes, solved the same way: the run's compiled program."""
-        out = _Search(self.model, data, self.testable, self.lm_steps, self.chunk)
-        out.solo = self.solo
-        return out
-
-    def fit(self, jobs):
-        """Solve ``jobs`` (see :func:`_fit_batch`) at the run's padded width, batch width and step cap."""
-        return _fit_batch(
-            jobs,
-            self.layout,
-            self.model,
-            self.testable,
-            self.data_dev,
-            self.k_pad,
-            self.b_pad,
-            self.lm_steps,
-            self.chunk,
-            self.solo,
-        )
-
-    def refine(self, r, active=()):
-        """Continue a fit that stopped at the step cap from where it stopped, up to ``_REFINE_ROUNDS`` times.
-
-        Curved valleys (γ against ρd, ρs and α; a second lobe against the
-        first) can take Levenberg–Marquardt more than ``lm_steps`` steps; a
-        fit whose parameters are reported, or whose Δχ² decides, must have
-        converged. The priors stay centred on the first start. A round that leaves χ² where it was ends
-        it (stalled; it stays unconverged) rather than repeat the same point.
-        """
-        last = math.inf
-        for _ in range(_REFINE_ROUNDS):
-            u, chi2, _, ok, idx, km, anchor = r
-            # a round that lowered nothing has stalled (a parameter pinned where its gradient vanishes): the next,
-            # from the same point, would repeat it exactly
-            if ok or not np.isfinite(chi2) or chi2 >= last:
-                break
-            last = chi2
-            job = (u, [int(j) for j in idx[km]], tuple(active), anchor)
-            # the run's own batch width and mode: the compiled program is reused, not a new one for width 1
-            r = self.fit([job])[0]
-        return r
-
-    def state_of(self, r, active) -> FitState:
-        """The :class:`FitState` of one fit result ``r`` with the effects ``active`` switched on.
-
-        The degrees of freedom count the free parameters, the profiled ones
-        and the active effects' data-dependent ones.
-        """
-        u, chi2, jtj, ok, idx, km, _ = r
-        n_par = int(km.sum()) + self.n_prof + sum(self.testable[i].n_data_params for i in active)
-        dof = max(self.n_obs - n_par, 1)
-        cov = _cov_full(self.layout, jtj, idx, km)
-        return FitState(
-            u=u,
-            chi2=chi2,
-            dof=dof,
-            gap=chi2 / dof,
-            ok=ok,
-            cov=cov,
-            active=tuple(active),
-            values=self.layout.natural(u),
-            sigma=self.layout.sigma(u, cov),
-            free=tuple(int(j) for j in idx[km]),
-        )
-
-    def residual_view(self, st: FitState) -> _View:
-        """Whitened residuals, prediction and covariates of ``st``: what the structure tests and plots read."""
-        act = np.array([i in st.active for i in range(len(self.testable))], bool)
-        with jax.enable_x64(True):  # the parameters too: outside, jnp.asarray would round them to float32
-            r, pred, rho = _residual_view(
-                jnp.asarray(st.u),
-                jnp.asarray(act),
-                self.data_dev,
-                model=self.model,
-                effects=self.testable,
-                layout_key=self.layout.key,
-            )
-        r, pred = np.asarray(r), np.asarray(pred)
-        return _View(st, r, pred, self.model.covariates(self.data, pred), None if rho is None else np.asarray(rho))
-
-
-def _baseline_jobs(layout: _Layout, base: tuple[Param, ...]):
-    """Baseline multi-start jobs: every combination of the model parameters' starting values.
-
-    Each parameter contributes its ``init`` first and then its other
-    ``starts``, so the first job is the plain initial guess.
-    """
-    u_init = layout.u_initial()
-    base_free = layout.slices["model"]
-    jobs = []
-    b_starts: list[tuple[float, ...]] = [()]
-    for p in base:
-        vals = (p.init,) + tuple(v for v in p.starts if v != p.init)
-        b_starts = [o + (v,) for o in b_starts for v in vals]
-    for st in b_starts:
-        u0 = u_init.copy()
-        for j, v in zip(base_free, st):
-            u0[j] = layout.entries[j][1].to_u(v)
-        jobs.append((u0, base_free, ()))
-    return jobs
 
 
 def _fit_baseline(search: _Search) -> FitState:
@@ -254,161 +102,6 @@ def _fit_baseline(search: _Search) -> FitState:
     res = search.fit(search.baseline_jobs)
     best = search.refine(min(res, key=lambda t: t[1] if np.isfinite(t[1]) else np.inf))
     return search.state_of(best, ())
-
-
-def _candidate_jobs(search: _Search, cur: FitState, remaining: list[int]):
-    """Jobs extending ``cur`` by each remaining effect, one per start of that effect.
-
-    Returns the jobs, ``(effect index, form)`` of each job, and the free
-    parameter indices of ``cur`` (model plus active effects), which every job
-    frees together with its own effect's. Form 0 frees all the effect's
-    parameters; form 1, for an effect with optional parameters, holds those
-    at their absent value.
-    """
-    layout, testable = search.layout, search.testable
-    jobs, owner = [], []
-    free_cur = list(cur.free)  # the model's and the active effects' (optional ones held stay held)
-    for i in remaining:
-        e = testable[i]
-        own = layout.slices[e.name]
-        pinned = [j for j, p in zip(own, e.params) if p.optional]
-        reduced = [[j for j in own if j not in pinned]] if pinned else []
-        # textured (search.cross set), an optional parameter is held absent: see Param.optional
-        forms = ([own] if search.cross is None or not pinned else []) + reduced
-        for form, free_e in enumerate(forms):
-            for st in e.starts():
-                u0 = cur.u.copy()
-                for j, v, p in zip(own, st, e.params):
-                    u0[j] = p.to_u(v if j in free_e else p.absent)
-                jobs.append((u0, free_cur + free_e, cur.active + (i,)))
-                owner.append((i, form))
-    return jobs, owner, free_cur
-
-
-def _score_candidate(search: _Search, cur: FitState, structure_p_of: Callable[[str], float], i: int, rs):
-    """The :class:`Candidate` for effect ``i`` from its fits ``rs``, and the index of the fit it rests on.
-
-    The best physical start is chosen (a fit on the unphysical side of an
-    amplitude counts as no evidence, Δχ² = 0); the index is ``None`` when no
-    start gave a finite fit.
-    """
-    e = search.testable[i]
-    sts = [search.state_of(r, cur.active + (i,)) for r in rs]
-    # parameters each fit spends on the effect: all of them, or the reduced form without its optional ones
-    ks = [len(st.free) - len(cur.free) + e.n_data_params for st in sts]
-    phys = [k for k, st in enumerate(sts) if e.physical(st.values[e.name])]
-    pool = phys or range(len(sts))
-    # the best form by BIC (for an effect without optional parameters: the lowest χ²)
-    k = min(pool, key=lambda k: sts[k].chi2 + ks[k] * search.ln_n) if sts else None
-    sp = structure_p_of(e.covariate)
-    if k is None:
-        return Candidate(e.name, e.k, math.nan, -math.inf, 1.0, 0.0, sp, False, None, math.nan), None
-    chosen, n_k = sts[k], ks[k]
-    dchi2 = max(cur.chi2 - chosen.chi2 if phys else 0.0, 0.0)
-    excess = max(cur.chi2 - cur.dof, dchi2, 1e-300)
-    return Candidate(
-        effect=e.name,
-        k=n_k,
-        delta_chi2=dchi2,
-        delta_bic=dchi2 - n_k * search.ln_n,
-        p_value=_lr_p(dchi2, e, n_k),
-        explained=dchi2 / excess,
-        structure_p=sp,
-        physical=bool(phys),
-        state=chosen,
-        gap_p_after=_gap_p(chosen.chi2, chosen.dof) if phys else _gap_p(cur.chi2, cur.dof),
-    ), k
-
-
-def _continue_contenders(search: _Search, cur: FitState, remaining: list, fits: dict, scored: dict, score):
-    """Continue the fits that stopped at the step cap where they decide the step, and rescore them in place.
-
-    These are the winner's and those of runners-up whose ΔBIC (a lower bound
-    while unconverged) already reaches ``_REFINE_BIC`` of the winner's: the
-    ranking among them, and the reported parameters, need converged fits.
-    Repeats until no such unconverged fit is left unrefined, since a
-    continued fit can change which candidate leads.
-    """
-    refined: set = set()
-    while True:
-        top = max(scored[i][0].delta_bic for i in remaining)
-        todo = [
-            i
-            for i in remaining
-            if i not in refined
-            and scored[i][1] is not None
-            and not scored[i][0].state.ok
-            and (scored[i][0].delta_bic == top or scored[i][0].delta_bic >= _REFINE_BIC * top > 0)
-        ]
-        if not todo:
-            break
-        for i in todo:
-            k = scored[i][1]
-            fits[i][k] = search.refine(fits[i][k], cur.active + (i[0],))
-            scored[i] = score(i[0], fits[i])
-            refined.add(i)
-
-
-def _rechecked(search: _Search, cur: FitState, win: Candidate) -> Candidate:
-    """``win`` with the guard's second opinion, the texture's covariance from the variogram, where it is carried."""
-    got = None if search.recheck is None or win.state is None else search.recheck(cur, win.state)
-    return win if got is None else dataclasses.replace(win, variogram=got)
-
-
-def _deflated(search: _Search, cur: _View, cand: Candidate, state: FitState) -> Candidate:
-    """``cand`` with Δχ² deflated by the texture between scanlines in ΔBIC and the p-value (:class:`CrossTexture`)."""
-    new, cross = search.residual_view(state), search.cross
-    assert cross is not None  # called only where the texture is carried (_rank_candidates)
-    dchi2, deff = cross.deflate(cand.delta_chi2, cur.r, cur.state.chi2, new.r, state.chi2, new.pred)
-    e = next(t for t in search.testable if t.name == cand.effect)
-    return dataclasses.replace(
-        cand, delta_bic=dchi2 - cand.k * search.ln_n, p_value=_lr_p(dchi2, e, cand.k), design_effect=deff
-    )
-
-
-def _rank_candidates(search: _Search, cur: _View, remaining: list[int]):
-    """Fit every remaining effect on top of ``cur`` and rank the candidates by ΔBIC, best first.
-
-    Returns the sorted candidates and the fitted state of each effect that
-    gave a finite fit, or ``None`` when the current model leaves no room in
-    the padded parameter width for another effect.
-    """
-    mask = search.mask
-    r_flat = _flat(cur.r.reshape(mask.shape) if mask is not None else cur.r, mask)
-    jobs, owner, free_cur = _candidate_jobs(search, cur.state, remaining)
-    if len(free_cur) + 2 > search.k_pad:
-        return None
-    structure_p = {}  # binned test per covariate: the residuals and covariates are fixed within a step
-
-    def structure_p_of(name: str) -> float:
-        if name not in cur.covs:
-            return math.nan
-        if name not in structure_p:
-            structure_p[name] = _binned_test(r_flat, _flat(cur.covs[name], mask))[2]
-        return structure_p[name]
-
-    res = search.fit(jobs)
-    score = functools.partial(_score_candidate, search, cur.state, structure_p_of)
-    keys = list(dict.fromkeys(owner))  # (effect, form)
-    fits = {key: [r for r, o in zip(res, owner) if o == key and np.isfinite(r[1])] for key in keys}
-    scored = {key: score(key[0], fits[key]) for key in keys}
-    _continue_contenders(search, cur.state, keys, fits, scored, score)
-    by_form = {key: st for key in keys if scored[key][1] is not None and (st := scored[key][0].state) is not None}
-    evidence = {key: scored[key][0] for key in keys}
-    if search.cross is not None:  # the texture between scanlines and channels inflates coherent evidence
-        for key in by_form:
-            if evidence[key].delta_bic > 0:
-                evidence[key] = _deflated(search, cur, evidence[key], by_form[key])
-    # each effect by its better form (the reduced one where its optional parameters do not pay their way)
-    best = {}
-    for key in keys:
-        if key[0] not in best or evidence[key].delta_bic > evidence[best[key[0]]].delta_bic:
-            best[key[0]] = key
-    by_effect = {i: by_form[key] for i, key in best.items() if key in by_form}
-    evidence = {i: evidence[key] for i, key in best.items()}
-    cands = list(evidence.values())
-    cands.sort(key=lambda c: -c.delta_bic)
-    return _dominant_first(cands), by_effect
 
 
 class _Steps:
