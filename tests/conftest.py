@@ -9,6 +9,8 @@ ranks or a silent float32 → float64 promotion is an error.
 """
 
 import os
+import shutil
+import tempfile
 
 import jax
 import numpy as np
@@ -30,6 +32,33 @@ with install_import_hook("wardjax", "_typecheck.typecheck"):
 # run it in-process, so they leave it off unless a test turns it on itself
 # (tests/test_cli_fit.py checks the cache in a subprocess).
 os.environ.setdefault("WARDJAX_NO_CACHE", "1")
+
+# Both xdist workers compile much the same programs; they share them through
+# one JAX compilation cache for the run (a size limit turns on JAX's file lock,
+# so the workers never read a half-written entry). The controller makes the
+# folder before the workers start and removes it at the end.
+_SHARED_CACHE = "WARDJAX_TEST_COMPILE_CACHE"
+
+
+def pytest_configure(config):
+    if not hasattr(config, "workerinput") and _SHARED_CACHE not in os.environ:
+        os.environ[_SHARED_CACHE] = tempfile.mkdtemp(prefix="wardjax-test-jax-")
+        config.stash[_cache_key] = os.environ[_SHARED_CACHE]
+    folder = os.environ[_SHARED_CACHE]
+    jax.config.update("jax_compilation_cache_dir", folder)
+    jax.config.update("jax_compilation_cache_max_size", 4 << 30)
+    jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.2)
+    jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
+
+
+def pytest_unconfigure(config):
+    folder = config.stash.get(_cache_key, None)
+    if folder is not None:
+        shutil.rmtree(folder, ignore_errors=True)
+        os.environ.pop(_SHARED_CACHE, None)
+
+
+_cache_key = pytest.StashKey[str]()
 
 
 @pytest.fixture
