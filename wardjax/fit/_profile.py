@@ -43,6 +43,7 @@ __all__ = [
     "profile_flagged",
     "rescale",
     "rescale_rows",
+    "round_lanes",
 ]
 
 PROFILE_HALF = 6.0  # farthest a crossing is sought, in Gauss–Newton standard errors of log α
@@ -139,15 +140,32 @@ rescale_rows = jax.jit(jax.vmap(rescale))  # (R, P, P), (R, P, P), (R, 2) → (R
 def profile_flagged(prepared: _varpro.Prepared, sol: _varpro.ScanlineSolution, lanes: int):
     """``sol`` of a chunk with the profile errors of its :data:`PENDING` rows, in the same program.
 
-    Up to ``lanes`` pending rows (a static count) are compacted into that many lanes
-    (``jnp.nonzero`` with a static size), profiled there and scattered back: ``sol.cov``
-    rescaled by :func:`rescale`, ``nonlinear`` set to :data:`PROFILED` (0 where the profile gave
-    no usable σ). The cost is ``lanes`` rows' profiles, whatever the chunk's size, and nothing in
-    a chunk with no pending row (a ``lax.cond``). Rows past the lanes stay :data:`PENDING` for
-    the caller to profile apart.
+    Up to ``lanes`` pending rows (a static count) are profiled, in rounds of :func:`round_lanes`
+    lanes: each round compacts the next pending rows into its lanes (``jnp.nonzero`` with a static
+    size), profiles them and scatters them back (``sol.cov`` rescaled by :func:`rescale`,
+    ``nonlinear`` set to :data:`PROFILED`, or 0 where the profile gave no usable σ). A
+    ``lax.while_loop`` runs only as many rounds as there are pending rows to fill: the cost follows
+    the failures (none in a chunk without one), not the largest share a chunk may hold. Rows past
+    ``lanes`` stay :data:`PENDING` for the caller to profile apart.
     """
-    pending = jnp.any(sol.nonlinear == PENDING)
-    return jax.lax.cond(pending, functools.partial(_profile_lanes, lanes=lanes), lambda p, s: s, prepared, sol)
+    width = round_lanes(lanes)
+    rounds = -(-lanes // width)
+
+    def more(carry):
+        i, s = carry
+        return (i < rounds) & jnp.any(s.nonlinear == PENDING)
+
+    def step(carry):
+        i, s = carry
+        return i + 1, _profile_lanes(prepared, s, lanes=width)
+
+    return jax.lax.while_loop(more, step, (jnp.zeros((), jnp.int32), sol))[1]
+
+
+def round_lanes(lanes: int) -> int:
+    """Lanes of one round of :func:`profile_flagged`: a quarter of ``lanes`` (at least 1), so that a
+    chunk with few failures pays for a quarter of its share, and one with many for four rounds."""
+    return max(lanes // 4, 1)
 
 
 def _profile_lanes(prepared, sol, *, lanes: int):
