@@ -15,9 +15,9 @@ import pytest
 
 pytest.importorskip("pyradiance")
 
-from benchmarks.radiance_bench._bench import materials, outcome  # noqa: E402
-from benchmarks.radiance_bench._cases import CASES, components, wood  # noqa: E402
-from benchmarks.radiance_bench._scene import LAMP_RADIUS  # noqa: E402
+from benchmarks.radiance_bench._bench import materials, outcome
+from benchmarks.radiance_bench._cases import CASES, components, wood
+from benchmarks.radiance_bench._scene import LAMP_RADIUS
 
 SIZE = (40, 30)
 
@@ -41,7 +41,9 @@ def closed_form(rig, p, rows, cols, factor=None) -> np.ndarray:
     lobe = (h * h).sum(1) / (math.pi * h[:, 2] ** 4 * np.sqrt(ax2 * ay2))
     lobe *= np.exp(-(h[:, 0] ** 2 / ax2 + h[:, 1] ** 2 / ay2) / h[:, 2] ** 2)
     spec = np.where(on_probe, float(p.rho_s) * lobe, 0.0)
-    inside = [(b[0] < pt[:, 0]) & (pt[:, 0] < b[1]) & (b[2] < pt[:, 1]) & (pt[:, 1] < b[3]) for b in (rig.probe, rig.standard)]
+    inside = [
+        (b[0] < pt[:, 0]) & (pt[:, 0] < b[1]) & (b[2] < pt[:, 1]) & (pt[:, 1] < b[3]) for b in (rig.probe, rig.standard)
+    ]
     return (inside[0] | inside[1])[:, None] * (omega * wi[:, 2])[:, None] * (rho_d / math.pi + spec[:, None])
 
 
@@ -74,9 +76,8 @@ def test_outcomes_are_read_against_the_truth():
 def test_every_case_writes_a_capture_wardjax_loads(tmp_path):
     """Each case's capture loads; its camera puts every pixel on the point the bench's ray hits."""
     import wardjax as wj
-    from wardjax.geometry import pixel_geometry
-
     from benchmarks.radiance_bench._sensor import write_capture
+    from wardjax.geometry import pixel_geometry
 
     for name, case in CASES.items():
         comp = components(case, materials()["satin"], "wood" if name == "null" else "none", 1, SIZE)

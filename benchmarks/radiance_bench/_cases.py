@@ -82,8 +82,7 @@ CASES = {
         Case("second_lamp", "out", lamp2=0.08),
         Case("room_light", "out", room=0.15),
         Case("smudge", "out", smudge=True),
-        Case("ramp_response", "two", ("illumination_gradient", "directional_emission", "gamma"), ramp=0.3,
-             response="power"),  # fmt: skip
+        Case("ramp_response", "two", ("illumination_gradient", "directional_emission", "gamma"), 0.3, response="power"),
     )
 }
 LAMP2 = (0.0, 150.0, 450.0)

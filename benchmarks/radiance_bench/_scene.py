@@ -116,7 +116,8 @@ def lamp_text(name: str, position, radiance: float, modifier: str = "void") -> s
     """A grey ``light`` sphere of radius :data:`LAMP_RADIUS` (``modifier``: a ``brightfunc`` pattern or ``void``)."""
     r = _f(radiance)
     x, y, z = (_f(c) for c in position)
-    return f"{modifier} light {name}_light\n0\n0\n3 {r} {r} {r}\n{name}_light sphere {name}\n0\n0\n4 {x} {y} {z} {LAMP_RADIUS}\n"
+    light = f"{modifier} light {name}_light\n0\n0\n3 {r} {r} {r}\n"
+    return light + f"{name}_light sphere {name}\n0\n0\n4 {x} {y} {z} {LAMP_RADIUS}\n"
 
 
 def ward_material(name: str, rho_d, rho_s: float, alpha_x: float, alpha_y: float, modifier: str = "void") -> str:

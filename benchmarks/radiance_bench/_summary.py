@@ -72,8 +72,9 @@ def summary(rows: list[dict]) -> str:
     zs, za = f["z"]["rho_s"], f["z"]["alpha"]
     ns, na = f["z_null"]["rho_s"], f["z_null"]["alpha"]
     lo, hi = (min(f["band"][2]), max(f["band"][2])) if f["band"][2] else (float("nan"),) * 2
+    loads = [float(r["load"]) for r in rows]
     lines = [
-        f"- {f['n']} captures; loads {min(float(r['load']) for r in rows):.0f}–{max(float(r['load']) for r in rows):.0f}",
+        f"- {f['n']} captures; load {min(loads):.0f}–{max(loads):.0f}",
         f"- in-library effects named first: {_pct(*f['in'])}",
         f"- out-of-library effects named as a library effect: {_pct(*f['out'])}",
         f"- nulls naming an effect not present: {_pct(*f['null'])}; isotropic nulls reading "
