@@ -135,33 +135,25 @@ def standard_text(rho: float = 0.99) -> str:
 
 
 def render(rig: Rig, scene: str, files: dict[str, str] | None = None, ambient: float = 0.0) -> np.ndarray:
-    """``(H, W, 3)`` radiance of ``scene`` (with its function/data ``files``) by ``oconv`` + ``rtrace``."""
-    bindir, libdir = _radiance_dirs()
+    """``(H, W, 3)`` radiance of ``scene`` (with its function/data ``files``) by ``oconv`` + ``rtrace``.
+
+    The programs are pyradiance's builds, run in a temporary folder holding the scene and its files, with
+    Radiance's own library (``rayinit.cal``…) on ``RAYPATH``.
+    """
+    from pyradiance.anci import BINPATH
+
+    env = dict(os.environ, RAYPATH=os.pathsep.join([".", str(BINPATH.parent / "lib")]))
     rays = rig.rays().astype(np.float32)
-    env = dict(os.environ, RAYPATH=os.pathsep.join([".", str(libdir)]))
     with tempfile.TemporaryDirectory(prefix="radbench-") as tmp:
-        for name, text in (files or {}).items():
+        for name, text in {**(files or {}), "scene.rad": scene}.items():
             Path(tmp, name).write_text(text)
-        Path(tmp, "scene.rad").write_text(scene)
-        octree = _run([str(bindir / "oconv"), "-f", "scene.rad"], tmp, env)
-        Path(tmp, "scene.oct").write_bytes(octree)
-        av = [_f(ambient)] * 3
-        out = _run([str(bindir / "rtrace"), "-h", "-fff", *RTRACE, "-av", *av, "scene.oct"], tmp, env, rays.tobytes())
-    return np.frombuffer(out, np.float32).reshape(rig.height, rig.width, 3).astype(np.float64)
-
-
-def _radiance_dirs() -> tuple[Path, Path]:
-    import importlib.util
-
-    spec = importlib.util.find_spec("pyradiance")
-    if spec is None or not spec.submodule_search_locations:
-        raise ModuleNotFoundError("the Radiance bench needs pyradiance (it ships oconv and rtrace)")
-    root = Path(next(iter(spec.submodule_search_locations)))
-    return root / "bin", root / "lib"
-
-
-def _run(cmd: list[str], cwd: str, env: dict, stdin: bytes | None = None) -> bytes:
-    res = subprocess.run(cmd, cwd=cwd, input=stdin, capture_output=True, env=env, check=False)
-    if res.returncode != 0:
-        raise RuntimeError(f"{Path(cmd[0]).name} failed (exit {res.returncode}): {res.stderr.decode().strip()}")
-    return res.stdout
+        steps = [(["oconv", "-f", "scene.rad"], None), (["rtrace", "-h", "-fff", *RTRACE], rays.tobytes())]
+        steps[1][0].extend(["-av", *[_f(ambient)] * 3, "scene.oct"])
+        for cmd, stdin in steps:
+            res = subprocess.run([str(BINPATH / cmd[0]), *cmd[1:]], cwd=tmp, input=stdin, capture_output=True,
+                                 env=env, check=False)  # fmt: skip
+            if res.returncode != 0:
+                raise RuntimeError(f"{cmd[0]} failed (exit {res.returncode}): {res.stderr.decode().strip()}")
+            if cmd[0] == "oconv":
+                Path(tmp, "scene.oct").write_bytes(res.stdout)
+    return np.frombuffer(res.stdout, np.float32).reshape(rig.height, rig.width, 3).astype(np.float64)
