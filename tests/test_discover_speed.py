@@ -51,7 +51,7 @@ def test_gls_whitening_of_all_columns_at_once_is_each_whitened_alone(rng):
     its own vector (``_whiten``, the values ordered channel by channel)."""
     import jax
 
-    from wardjax.effects._models import _gls_whitened, _whiten
+    from wardjax.effects._gls import _gls_whitened, _whiten
 
     W, inv_sp, resid = _whitened_problem(rng)
     with jax.enable_x64(True):
@@ -67,7 +67,7 @@ def test_gls_rho_derivative_by_hand_is_autodiff_through_the_whitening(rng):
     autodiff of the same least squares differentiated through ``W`` (and the value against the normal equations)."""
     import jax
 
-    from wardjax.effects._models import _gls_rho_joint, _gls_solve, _gls_whitened
+    from wardjax.effects._gls import _gls_rho_joint, _gls_solve, _gls_whitened
 
     W, inv_sp, resid = _whitened_problem(rng)
     d_inv, d_res = rng.normal(size=inv_sp.shape), rng.normal(size=resid.shape)
