@@ -1,7 +1,8 @@
-"""How ``discover`` runs: NumPy's linear algebra on one BLAS thread, restored afterwards."""
+"""How ``discover`` runs: NumPy's linear algebra on one BLAS thread (restored after); ρd's whitened least squares."""
 
 from __future__ import annotations
 
+import numpy as np
 import pytest
 from threadpoolctl import threadpool_info, threadpool_limits
 
@@ -35,3 +36,51 @@ def test_discover_runs_numpy_linear_algebra_on_one_blas_thread(monkeypatch):
         after = _blas_threads()
     assert seen == [[1] * len(before)]
     assert after == before
+
+
+def _whitened_problem(rng, s_n=3, n=5, c_n=3):
+    """A lower-triangular whitening ``(S, C N, C N)`` with the channels of a scanline together, and GLS inputs."""
+    m = c_n * n
+    W = np.tril(rng.normal(size=(s_n, m, m))) + 3.0 * np.eye(m)
+    inv_sp, resid = rng.uniform(0.5, 2.0, (s_n, n, c_n)), rng.normal(size=(s_n, n, c_n))
+    return W, inv_sp, resid
+
+
+def test_gls_whitening_of_all_columns_at_once_is_each_whitened_alone(rng):
+    """ρd's design columns and the data go through the whitening in one product; each column is the whitening of
+    its own vector (``_whiten``, the values ordered channel by channel)."""
+    import jax
+
+    from wardjax.effects._gls import _gls_whitened, _whiten
+
+    W, inv_sp, resid = _whitened_problem(rng)
+    with jax.enable_x64(True):
+        A, b = (np.asarray(x) for x in _gls_whitened(W, inv_sp, resid))
+        for c in range(inv_sp.shape[-1]):
+            alone = np.where(np.arange(inv_sp.shape[-1]) == c, inv_sp, 0.0)
+            np.testing.assert_allclose(A[..., c], np.asarray(_whiten(W, alone)), rtol=1e-12, atol=1e-12)
+        np.testing.assert_allclose(b, np.asarray(_whiten(W, resid)), rtol=1e-12, atol=1e-12)
+
+
+def test_gls_rho_derivative_by_hand_is_autodiff_through_the_whitening(rng):
+    """The profiled ρd's derivative rule, ``dx = H⁻¹ (dDᵀ Wᵀ e + (Wᵀ A)ᵀ (dr − dD x))``, against forward-mode
+    autodiff of the same least squares differentiated through ``W`` (and the value against the normal equations)."""
+    import jax
+
+    from wardjax.effects._gls import _gls_rho_joint, _gls_solve, _gls_whitened
+
+    W, inv_sp, resid = _whitened_problem(rng)
+    d_inv, d_res = rng.normal(size=inv_sp.shape), rng.normal(size=resid.shape)
+    with jax.enable_x64(True):
+        p_ref, t_ref = jax.jvp(lambda a, r: _gls_solve(*_gls_whitened(W, a, r)), (inv_sp, resid), (d_inv, d_res))
+        p, t = jax.jvp(lambda a, r: _gls_rho_joint(W, a, r), (inv_sp, resid), (d_inv, d_res))
+    np.testing.assert_array_equal(np.asarray(p), np.asarray(p_ref))
+    np.testing.assert_allclose(np.asarray(t), np.asarray(t_ref), rtol=1e-10, atol=1e-12)
+    # the value: the normal equations of each scanline, solved with NumPy
+    s_n, n, c_n = inv_sp.shape
+    for s in range(s_n):
+        X = np.zeros((c_n * n, c_n))
+        for c in range(c_n):
+            X[c * n : (c + 1) * n, c] = inv_sp[s, :, c]
+        A, b = W[s] @ X, W[s] @ resid[s].T.reshape(-1)
+        np.testing.assert_allclose(np.asarray(p)[s, 0] / np.pi, np.linalg.solve(A.T @ A, A.T @ b), rtol=1e-10)

@@ -44,10 +44,10 @@ from jax.scipy.special import log_ndtr
 
 from ..ward import NORMALIZATIONS, ward_geometry
 from ._effect import Param
+from ._gls import _TINY, _gls_design, _gls_rho, _gls_solve, _whiten
 
 __all__ = ["ScanlineData", "ScanlineModel", "ThresholdData", "ThresholdModel", "scanline_data", "threshold_data"]
 
-_TINY = 1e-30
 LENGTH_SCALE_MM = 100.0
 
 
@@ -347,36 +347,9 @@ def _switch(active, e, hook: str):
     return None if active is None else active.get(e.name)
 
 
-def _whiten(W, z):
-    """``L⁻¹ z`` along each scanline: ``z`` ``(S, N, C)``; ``W`` ``(S, C, N, N)`` per channel or ``(S, C N, C N)``
-    with the channels of a scanline together (values ordered channel by channel)."""
-    if W.ndim == 3:
-        s_n, n, c_n = z.shape
-        zj = jnp.swapaxes(z, 1, 2).reshape(s_n, c_n * n)
-        return jnp.swapaxes(jnp.einsum("sij,sj->si", W, zj).reshape(s_n, c_n, n), 1, 2)
-    return jnp.einsum("scij,sjc->sic", W, z)
-
-
 def _whitened_design(data) -> jnp.ndarray:
     """``L⁻¹`` of ``1/σ`` on each channel alone (zero off the mask), ``(S, N, C, C_cols)``: ρd's design, whitened."""
     return _gls_design(data.whiten, jnp.where(data.mask, 1.0 / data.sigma, 0.0))
-
-
-def _gls_design(W, inv_sp):
-    """ρd's whitened design ``(S, N, C, C_cols)``: column ``c`` is ``L⁻¹`` of ``inv_sp`` on channel ``c`` alone."""
-    c_n = inv_sp.shape[-1]
-    if W.ndim == 3:
-        eye = jnp.eye(c_n, dtype=inv_sp.dtype)
-        return jnp.stack([_whiten(W, inv_sp * eye[c][None, None, :]) for c in range(c_n)], -1)
-    return jnp.stack([_whiten(W, inv_sp)[..., c][..., None] * jnp.eye(c_n)[c] for c in range(c_n)], -2)
-
-
-def _gls_solve(A, b):
-    """``π`` times the least-squares ``ρd/π`` ``(S, 1, C)`` of whitened data ``b`` ``(S, N, C)`` on design ``A``."""
-    c_n = A.shape[-1]
-    AtA = jnp.einsum("snck,sncl->skl", A, A) + _TINY * jnp.eye(c_n)[None]
-    Atb = jnp.einsum("snck,snc->sk", A, b)
-    return jnp.pi * jnp.linalg.solve(AtA, Atb[..., None])[..., 0][:, None, :]
 
 
 def _measured_as_is(active, effects):
@@ -395,22 +368,6 @@ def _measured_as_is(active, effects):
     if all(isinstance(f, bool) for f in flags):
         return not any(flags)
     return ~jnp.any(jnp.stack([jnp.asarray(f) for f in flags]))
-
-
-def _gls_rho(W, inv_sp, resid):
-    """ρd per scanline and channel ``(S, 1, C)`` by generalised least squares under the whitening ``W``.
-
-    ``ρd_c/π`` is a constant added to channel ``c`` of each scanline: its
-    whitened design column is ``L⁻¹`` of ``1/σ`` on that channel. Whitened
-    per channel the normal equations are one division per channel; with the
-    channels together (``W`` ``(S, C N, C N)``) they are a ``C × C`` solve per
-    scanline.
-    """
-    if W.ndim == 3:
-        return _gls_solve(_gls_design(W, inv_sp), _whiten(W, resid))
-    a = _whiten(W, inv_sp)
-    b = _whiten(W, resid)
-    return jnp.pi * jnp.sum(a * b, axis=1, keepdims=True) / jnp.maximum(jnp.sum(a * a, axis=1, keepdims=True), _TINY)
 
 
 @dataclasses.dataclass(frozen=True)
