@@ -15,7 +15,8 @@ that is
   ``−2 Σ_p log Σ_l π_l e^{−χ²_pl/2} + (k(1+d) + k − 1) ln n``, ``n`` the number
   of observations, unless ``n_clusters`` fixes it; a count whose clusters hold
   under 2 % of the pixels, or whose lobe no material has (ρs > 1, α at its
-  bound), is not considered;
+  bound), is not considered, nor one that predicts held-out photos no better
+  than a smaller count (:mod:`._pixel_heldout`);
 * ``"pixel"``: every pixel's own lobe where its photos see the highlight — a
   pixel keeps its lobe where :func:`~wardjax.fit_scanlines` certifies it
   (lobe detected at 5σ, α resolved) and it lowers the pixel's χ² by more than
@@ -23,7 +24,7 @@ that is
 
 Above :data:`._pixel_sample.LOBE_SAMPLE` pixels the lobes (and the cluster
 count) are searched for on a random sample of the pixels and then refined on
-all of them (:mod:`._pixel_sample`).
+all of them (:mod:`._pixel_sample`; without normals in one pass, :mod:`._pixel_refine`).
 
 ``normals=True`` adds a normal per pixel (:mod:`._pixel_normals`); a pixel
 keeps its normal where it lowers its χ² by more than ``2 ln n`` (BIC), else it
