@@ -52,9 +52,10 @@ def test_heldout_chi2_equals_refitting_each_pixel_without_each_photo():
         geom = pm.geometry(jnp.asarray(data.wi), jnp.asarray(data.wo), flat, jnp.asarray([1.0, 0.0, 0.0]), NORM)
         theta, s = jnp.log(jnp.asarray([[0.08], [0.2], [0.13]])), jnp.asarray([0.06, 0.12, 0.09])
         log_pi = jnp.log(jnp.asarray([0.5, 0.3, 0.2]))
-        ours = float(heldout_chi2(theta, s, log_pi, geom, f, w))
+        ours, n_held = heldout_chi2(theta, s, log_pi, geom, f, w)
+        assert int(n_held) == f.size  # every value is predicted from its pixel's other photos
         ref = _brute_force(np.asarray(theta), np.asarray(s), np.asarray(log_pi), geom, np.asarray(f), np.asarray(w))
-    np.testing.assert_allclose(ours, ref, rtol=1e-9)
+    np.testing.assert_allclose(float(ours), ref, rtol=1e-9)
 
 
 @pytest.mark.slow  # two fits' compilation; the one-pass finish runs by default only above 16,384 pixels

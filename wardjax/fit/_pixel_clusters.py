@@ -17,6 +17,8 @@ not considered; nor is one whose held-out χ² (:mod:`._pixel_heldout`: each
 photo predicted from each pixel's other photos) is not below that of every
 smaller count. Far from the data (bumps fitted flat) the BIC falls with every
 lobe that fits a highlight of the fitted photos; the held-out photos refuse them.
+Where no pixel has two usable photos (one photo) nothing can be held out, and
+the BIC decides alone.
 """
 
 from __future__ import annotations
@@ -124,8 +126,9 @@ def choose_clusters(data, geom, shared, d, n_clusters, seed, normalization, ln_n
             cand = (theta[:k], s[:k], labels)
             padded = (theta, s)
         bic[k] = -2.0 * loglike + (k * (1 + d) + k - 1) * ln_n
-        held[k] = float(heldout_chi2(*padded, log_pi, geom, f, w))
-        if any(held[k] >= v for j, v in held.items() if j < k):
+        score, n_held = heldout_chi2(*padded, log_pi, geom, f, w)
+        held[k] = float(score)
+        if int(n_held) > 0 and any(held[k] >= v for j, v in held.items() if j < k):
             continue  # a count must predict held-out photos better than every smaller one (._pixel_heldout)
         if best is None or bic[k] < bic[best[0]]:
             best = (k, cand)

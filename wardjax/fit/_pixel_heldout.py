@@ -33,7 +33,8 @@ __all__ = ["heldout_chi2"]
 
 @jax.jit
 def heldout_chi2(theta, s, log_pi, geom: pm.PixelGeometry, f, w):
-    """The held-out χ² (module docstring) of lobes ``theta (L, d)``, ``s (L,)`` with shares ``log_pi (L,)``."""
+    """The held-out χ² (module docstring) of lobes ``theta (L, d)``, ``s (L,)`` with shares ``log_pi (L,)``,
+    and the number of values it predicts (0 where no pixel has a second usable photo: nothing is held out)."""
     q = geom.q[..., None]  # (P, K, 1)
     wq = w * q
 
@@ -48,8 +49,8 @@ def heldout_chi2(theta, s, log_pi, geom: pm.PixelGeometry, f, w):
         a = jnp.where(ok, qr / safe, 0.0)
         chi2 = jnp.sum(jnp.where(ok, rr - qr * qr / safe, 0.0), -1)  # (P, K)
         err = jnp.sum(jnp.where(ok, w * (r - q * a) ** 2, 0.0), -1)  # (P, K)
-        return chi2, err
+        return chi2, err, jnp.sum(ok & (w > 0))
 
-    chi2, err = jax.lax.map(one, (theta, s))  # (L, P, K) each
+    chi2, err, n = jax.lax.map(one, (theta, s))  # (L, P, K) each, and (L,)
     label = jnp.argmin(chi2 - 2.0 * log_pi[:, None, None], 0)  # (P, K)
-    return jnp.sum(jnp.take_along_axis(err, label[None], 0))
+    return jnp.sum(jnp.take_along_axis(err, label[None], 0)), n[0]
