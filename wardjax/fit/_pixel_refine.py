@@ -19,7 +19,7 @@ linearised model ``s B + δs B + s Σ_j δθ_j ∂B/∂θ_j``,
 (Gauss–Newton, Nocedal & Wright eq. 10.23). The same pass gives each lobe's
 χ² before the step, ``G_ff − 2 s G_Bf + s² G_BB``; the caller's one pass for
 every pixel's ρd (linear at fixed lobes), σ and χ² then checks the step: a lobe
-whose χ² rose keeps the sample's values (and that pass is run again).
+whose χ² did not fall keeps the sample's values (and that pass is run again).
 """
 
 from __future__ import annotations
@@ -73,7 +73,12 @@ def refine_on_all(theta, s, log_pi, geom, f, w, *, n_lobes: int):
 
 
 def steps_that_failed(pixel_chi2, labels, before, n_lobes: int) -> np.ndarray:
-    """``(L,)`` True where a lobe's χ² after the step, ``Σ_{p∈l} χ²_p``, exceeds its χ² before."""
+    """``(L,)`` True where a lobe's χ² after the step, ``Σ_{p∈l} χ²_p``, is not below its χ² before.
+
+    A step must lower χ² by more than rounding (10⁻⁹ of it): where the lobe is barely identified (one
+    photo per pixel, each pixel's ρd absorbing its value) χ² is flat along ρs, and a step along that
+    valley would move ρs (and every pixel's ρd with it) for nothing.
+    """
     after = np.bincount(np.asarray(labels), weights=np.asarray(pixel_chi2), minlength=n_lobes)
     b = np.asarray(before)
-    return after > b + 1e-9 * np.abs(b)
+    return after >= b - 1e-9 * np.abs(b)

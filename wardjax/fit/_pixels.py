@@ -568,7 +568,7 @@ def _fit(f, wi, wo, w, t, opts: _Options) -> PixelFit:
     outs = _outputs(theta, s, labels, geom, f, w, n_lobes=n_lobes)
     if fast:
         failed = steps_that_failed(outs[2], labels, chi2_before, n_lobes)
-        if np.any(failed):  # a lobe whose step raised its χ² keeps the sample's values
+        if np.any(failed):  # a lobe whose step did not lower its χ² keeps the sample's values
             bad = jnp.asarray(failed)
             theta, s = jnp.where(bad[:, None], sample_lobes[0], theta), jnp.where(bad, sample_lobes[1], s)
             outs = _outputs(theta, s, labels, geom, f, w, n_lobes=n_lobes)
