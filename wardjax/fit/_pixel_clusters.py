@@ -13,7 +13,12 @@ lowest BIC of the mixture,
 
 is kept (``n`` the number of observations). A count whose clusters hold under
 2 % of the pixels, or whose lobe no material has (ρs > 1, α at its bound), is
-not considered.
+not considered; nor is one whose held-out χ² (:mod:`._pixel_heldout`: each
+photo predicted from each pixel's other photos) is not below that of every
+smaller count. Far from the data (bumps fitted flat) the BIC falls with every
+lobe that fits a highlight of the fitted photos; the held-out photos refuse them.
+Where no pixel has two usable photos (one photo) nothing can be held out, and
+the BIC decides alone.
 """
 
 from __future__ import annotations
@@ -26,6 +31,7 @@ import numpy as np
 from scipy.cluster.vq import kmeans2
 
 from . import _pixel_model as pm
+from ._pixel_heldout import heldout_chi2
 from ._scanline import fit_scanlines
 
 __all__ = ["EM_ROUNDS", "MAX_CLUSTERS", "STEPS", "choose_clusters", "for_scanlines", "min_cluster_size"]
@@ -86,11 +92,14 @@ def choose_clusters(data, geom, shared, d, n_clusters, seed, normalization, ln_n
     counts = [n_clusters] if n_clusters else list(range(1, MAX_CLUSTERS + 1))
     min_size = min_cluster_size(p)
     bic: dict[int, float] = {}
+    held: dict[int, float] = {}
     best = None
     for k in counts:
         if k == 1:
             cand = (theta1, s1, jnp.zeros(p, jnp.int32))
             loglike = -0.5 * float(jnp.sum(chi2_1))
+            padded = (jnp.concatenate([theta1, jnp.zeros((slots - 1, d))]), jnp.concatenate([s1, jnp.zeros(slots - 1)]))
+            log_pi = jnp.asarray(np.where(np.arange(slots) < 1, 0.0, -np.inf))
         else:
             if feats.shape[0] < 5 * k:
                 break
@@ -115,10 +124,15 @@ def choose_clusters(data, geom, shared, d, n_clusters, seed, normalization, ln_n
                 continue  # a cluster the data do not support, or a lobe no material has (ρs > 1, α at its bound)
             loglike = float(jnp.sum(jax.scipy.special.logsumexp(log_pi[None] - 0.5 * costs, axis=1)))
             cand = (theta[:k], s[:k], labels)
+            padded = (theta, s)
         bic[k] = -2.0 * loglike + (k * (1 + d) + k - 1) * ln_n
+        score, n_held = heldout_chi2(*padded, log_pi, geom, f, w)
+        held[k] = float(score)
+        if int(n_held) > 0 and any(held[k] >= v for j, v in held.items() if j < k):
+            continue  # a count must predict held-out photos better than every smaller one (._pixel_heldout)
         if best is None or bic[k] < bic[best[0]]:
             best = (k, cand)
     if best is None:
         best = (1, (theta1, s1, jnp.zeros(p, jnp.int32)))
     k, (theta, s, labels) = best
-    return theta, s, labels, {"bic": bic, "n_clusters": k}
+    return theta, s, labels, {"bic": bic, "heldout_chi2": held, "n_clusters": k}

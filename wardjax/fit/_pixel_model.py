@@ -56,6 +56,7 @@ __all__ = [
     "lobe_covariance",
     "lobe_fit",
     "lobe_grid",
+    "lobe_gram",
     "lobe_profile",
     "local_frame",
     "pixel_chi2",
@@ -181,6 +182,11 @@ def _profile(gram):
     bf, bb = gram[:, 1, 0], gram[:, 1, 1]
     s = jnp.maximum(bf, 0.0) / jnp.where(bb > 0, bb, 1.0)
     return gram[:, 0, 0] - s * (2.0 * bf - s * bb), s
+
+
+def lobe_gram(theta, labels, geom, f, w, *, n_lobes: int):
+    """Per lobe ``(L, 2+d, 2+d)`` Gram matrix of ``(f̃, B̃, ∂B̃/∂θ…)`` at ``theta (L, d)``, summed over its pixels."""
+    return _lobe_gram(theta, labels, geom, _stats(geom.q, f, w), n_lobes)
 
 
 def lobe_profile(theta, labels, geom, f, w, n_lobes: int):

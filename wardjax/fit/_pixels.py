@@ -15,7 +15,8 @@ that is
   ``−2 Σ_p log Σ_l π_l e^{−χ²_pl/2} + (k(1+d) + k − 1) ln n``, ``n`` the number
   of observations, unless ``n_clusters`` fixes it; a count whose clusters hold
   under 2 % of the pixels, or whose lobe no material has (ρs > 1, α at its
-  bound), is not considered;
+  bound), is not considered, nor one that predicts held-out photos no better
+  than a smaller count (:mod:`._pixel_heldout`);
 * ``"pixel"``: every pixel's own lobe where its photos see the highlight — a
   pixel keeps its lobe where :func:`~wardjax.fit_scanlines` certifies it
   (lobe detected at 5σ, α resolved) and it lowers the pixel's χ² by more than
@@ -23,7 +24,7 @@ that is
 
 Above :data:`._pixel_sample.LOBE_SAMPLE` pixels the lobes (and the cluster
 count) are searched for on a random sample of the pixels and then refined on
-all of them (:mod:`._pixel_sample`).
+all of them (:mod:`._pixel_sample`; without normals in one pass, :mod:`._pixel_refine`).
 
 ``normals=True`` adds a normal per pixel (:mod:`._pixel_normals`); a pixel
 keeps its normal where it lowers its χ² by more than ``2 ln n`` (BIC), else it
@@ -60,10 +61,12 @@ from jaxtyping import Array, ArrayLike, Float
 from ..ward import NORMALIZATIONS
 from . import _pixel_model as pm
 from ._data import check_choice
+from ._pixel_checks import check_normals, validate
 from ._pixel_clusters import STEPS, choose_clusters, for_scanlines, min_cluster_size
 from ._pixel_height import check_image_shape, on_height_field
 from ._pixel_joint import reduced_system
 from ._pixel_normals import fit_normals, normal_from_slopes, normal_jacobian
+from ._pixel_refine import log_shares, refine_on_all, steps_that_failed
 from ._pixel_sample import POLISH, pixel_sample, spread, take
 from ._scanline import fit_scanlines
 
@@ -144,46 +147,6 @@ class PixelFit:
     @property
     def reduced_chi2(self) -> float:
         return self.chi2 / max(self.dof, 1)
-
-
-# --------------------------------------------------------------------------- boundary
-
-
-def _validate(f_r, wi, wo, weights, mask, tangent):
-    f = np.asarray(f_r, np.float64)
-    if f.ndim != 3:
-        raise ValueError(f"f_r must have shape (P, K, C), got {f.shape}")
-    p, k, c = f.shape
-    if p < 1 or k < 1 or c < 1:
-        raise ValueError(f"f_r must have at least one pixel, view and channel, got shape {f.shape}")
-    wi = np.asarray(wi, np.float64)
-    wo = np.asarray(wo, np.float64)
-    for name, d in (("wi", wi), ("wo", wo)):
-        if d.shape != (p, k, 3):
-            raise ValueError(f"{name} has shape {d.shape}, expected {(p, k, 3)} (f_r is {f.shape})")
-        norm = np.linalg.norm(d, axis=-1)
-        if not np.all(np.isfinite(d)) or np.any(np.abs(norm - 1.0) > 1e-6):
-            raise ValueError(f"{name} must hold finite unit vectors")
-    w = np.ones_like(f) if weights is None else np.asarray(weights, np.float64)
-    if w.shape == (p, k):
-        w = np.broadcast_to(w[..., None], f.shape)
-    if w.shape != f.shape:
-        raise ValueError(f"weights has shape {w.shape}, expected {f.shape} or {(p, k)}")
-    if np.any(w < 0) or not np.all(np.isfinite(w)):
-        raise ValueError("weights must be finite and non-negative (1/σ²)")
-    ok = np.isfinite(f) & (wi[..., 2:] > 1e-12) & (wo[..., 2:] > 1e-12)
-    if mask is not None:
-        m = np.asarray(mask)
-        if m.shape != (p, k) or m.dtype != bool:
-            raise ValueError(f"mask must be a boolean array of shape {(p, k)}, got {m.dtype} {m.shape}")
-        ok &= m[..., None]
-    w = np.where(ok, w, 0.0)
-    f = np.where(ok, f, 0.0)
-    t = np.array([1.0, 0.0, 0.0]) if tangent is None else np.asarray(tangent, np.float64)
-    if t.shape != (3,) or not np.all(np.isfinite(t)) or np.hypot(t[0], t[1]) < 1e-6:
-        raise ValueError(f"tangent must be a (3,) vector with a component in the sample plane, got {t}")
-    t = np.array([t[0], t[1], 0.0]) / np.hypot(t[0], t[1])
-    return f, wi, wo, w, t
 
 
 # --------------------------------------------------------------------------- the fit
@@ -382,10 +345,11 @@ def _lobe_covariance_with_normals(a, theta, s, labels, normal_map, data, t, norm
     return jnp.linalg.inv(info)
 
 
-def _clusters_on_sample(sub, data, geom, shared, d, n_clusters, seed, normalization):
-    """:func:`._pixel_clusters.choose_clusters` on the sample ``sub`` of the pixels (all where ``None``),
-    the lobes then carried to every pixel (:func:`._pixel_sample.spread`); returns ``theta``, ``s``,
-    ``labels``, the evidence (the BIC is the sample's, with its own ``n``)."""
+def _clusters_on_sample(sub, data, geom, shared, d, n_clusters, seed, normalization, carry=True):
+    """:func:`._pixel_clusters.choose_clusters` on the sample ``sub`` of the pixels (all where ``None``);
+    returns ``theta``, ``s``, ``labels``, the evidence (the BIC is the sample's, with its own ``n``).
+    With ``carry`` the lobes are carried to every pixel (:func:`._pixel_sample.spread`), else the labels
+    are the sample's (the caller finishes the lobes on all pixels, :mod:`._pixel_refine`)."""
     theta, s = shared
     geom_s, *data_s = take(sub, geom, *data)
     f_s, w_s = data_s[0], data_s[1]
@@ -398,6 +362,8 @@ def _clusters_on_sample(sub, data, geom, shared, d, n_clusters, seed, normalizat
     if sub is None:
         return theta, s, labels_s, ev
     ev["sample_pixels"] = int(sub.size)
+    if not carry:
+        return theta, s, labels_s, ev
     if int(theta.shape[0]) == 1:
         return theta, s, jnp.zeros(data[0].shape[0], jnp.int32), ev
     theta, s, labels = spread(theta, s, labels_s, geom, data[0], data[1])
@@ -502,22 +468,13 @@ def fit_pixels(
         raise ValueError(
             "normals=True needs lobe='shared' or 'clusters' (a per-pixel lobe and normal are not separable)"
         )
-    f, wi, wo, w, t = _validate(f_r, wi, wo, weights, mask, tangent)
+    f, wi, wo, w, t = validate(f_r, wi, wo, weights, mask, tangent)
     shape = None if height_field is None else check_image_shape(height_field, f.shape[0])
-    fixed = None if fixed_normals is None else _check_normals(fixed_normals, f.shape[0], normals, lobe)
+    fixed = None if fixed_normals is None else check_normals(fixed_normals, f.shape[0], normals, lobe)
     unweighted = weights is None
     with jax.enable_x64(True):
         opts = _Options(lobe, model, n_clusters, normals, normalization, seed, unweighted, shape, fixed)
         return _fit(f, wi, wo, w, t, opts)
-
-
-def _check_normals(fixed_normals, p, normals, lobe) -> np.ndarray:
-    if normals or lobe == "pixel":
-        raise ValueError("fixed_normals needs normals=False and lobe='shared' or 'clusters'")
-    n = np.asarray(fixed_normals, np.float64)
-    if n.shape != (p, 3) or not np.all(np.isfinite(n)) or np.any(n[:, 2] <= 0):
-        raise ValueError(f"fixed_normals must be ({p}, 3) finite normals with z > 0, got shape {n.shape}")
-    return n / np.linalg.norm(n, axis=-1, keepdims=True)
 
 
 class _Options(NamedTuple):
@@ -547,10 +504,11 @@ def _fit(f, wi, wo, w, t, opts: _Options) -> PixelFit:
     labels_s = jnp.zeros(f_s.shape[0], jnp.int32)
     start = jnp.broadcast_to(pm.lobe_grid(labels_s, geom_s, f_s, w_s, n_lobes=1)[:, None], (1, d))
     shared = pm.lobe_fit(start, labels_s, geom_s, f_s, w_s, n_lobes=1, steps=STEPS)
-    if sub is not None:
+    fast = sub is not None and not normals and lobe != "pixel"  # lobes finished in one pass (._pixel_refine)
+    if sub is not None and not fast:
         shared = pm.lobe_fit(shared[0], labels, geom, f, w, n_lobes=1, steps=POLISH)
     theta, s, chi2_l = shared
-    evidence: dict = {"chi2_shared": float(jnp.sum(chi2_l))}
+    evidence: dict = {} if fast else {"chi2_shared": float(jnp.sum(chi2_l))}
     data = (f, w, wi, wo)
 
     normal_map = None
@@ -570,7 +528,7 @@ def _fit(f, wi, wo, w, t, opts: _Options) -> PixelFit:
         shared = (theta, s, pm.lobe_profile(theta, labels, geom, f, w, 1)[0])
     if lobe == "clusters":
         theta, s, labels, evidence["clusters"] = _clusters_on_sample(
-            sub, data, geom, (theta, s), d, n_clusters, seed, normalization
+            sub, data, geom, (theta, s), d, n_clusters, seed, normalization, carry=not fast
         )
     elif lobe == "pixel":
         theta, s, labels, evidence["pixel"] = _pixel_lobes(data, geom, shared, model, normalization, ln_n, d)
@@ -603,7 +561,30 @@ def _fit(f, wi, wo, w, t, opts: _Options) -> PixelFit:
             extra = (normalization, opts.shape)
             theta, s, normal_map, geom, cov_ag, ev = on_height_field(theta, s, labels, normal_map, data, t, *extra)
             evidence["normals"]["height_field"] = {"delta_chi2": before - ev.pop("chi2"), **ev}
-    (a, inv_sq), (cov_lobe, var_a), pix_chi2 = _outputs(theta, s, labels, geom, f, w, n_lobes=n_lobes)
+    sample_lobes = (theta, s)
+    if fast:
+        log_pi = jnp.asarray(log_shares(labels, n_lobes))
+        theta, s, labels, chi2_before = refine_on_all(theta, s, log_pi, geom, f, w, n_lobes=n_lobes)
+    outs = _outputs(theta, s, labels, geom, f, w, n_lobes=n_lobes)
+    if fast:
+        failed = steps_that_failed(outs[2], labels, chi2_before, n_lobes)
+        if np.any(failed):  # a lobe whose step did not lower its χ² keeps the sample's values
+            bad = jnp.asarray(failed)
+            theta, s = jnp.where(bad[:, None], sample_lobes[0], theta), jnp.where(bad, sample_lobes[1], s)
+            outs = _outputs(theta, s, labels, geom, f, w, n_lobes=n_lobes)
+        if lobe == "shared":
+            evidence["chi2_shared"] = float(jnp.sum(outs[2]))
+    state = (theta, s, labels, normal_map, keep, cov_ag, n_obs, p, d, c)
+    return _assemble(outs, state, data, t, opts, evidence)
+
+
+def _assemble(outs, state, data, t, opts: _Options, evidence: dict) -> PixelFit:
+    """The :class:`PixelFit` from the final pass's ρd, covariances and χ² (``outs`` of :func:`_outputs`)."""
+    theta, s, labels, normal_map, keep, cov_ag, n_obs, p, d, c = state
+    w = data[1]
+    normals, normalization, unweighted = opts.normals, opts.normalization, opts.unweighted
+    n_lobes = int(theta.shape[0])
+    (a, inv_sq), (cov_lobe, var_a), pix_chi2 = outs
     slopes_var = None
     if normals and cov_ag is not None:
         var_a = jnp.where(keep[:, None], var_a - inv_sq + jnp.diagonal(cov_ag, axis1=1, axis2=2)[:, :c], var_a)
@@ -646,9 +627,9 @@ def _fit(f, wi, wo, w, t, opts: _Options) -> PixelFit:
         chi2=chi2,
         dof=dof,
         pixel_chi2=np.asarray(pix_chi2),
-        model=model,
+        model=opts.model,
         normalization=normalization,
-        lobe=lobe,
+        lobe=opts.lobe,
         tangent=np.asarray(t),
         evidence=evidence,
     )
