@@ -210,7 +210,7 @@ class _LobeSearch:
     def residual_view(self, st):
         from types import SimpleNamespace
 
-        return SimpleNamespace(r=self._r(st.u, st.active), rho=None)
+        return SimpleNamespace(r=self._r(st.u, st.active), rho=None, levels_chi2=0.0)
 
     def fit(self, jobs):
         from scipy.optimize import least_squares
@@ -266,3 +266,46 @@ def test_a_fold_that_cannot_pin_the_lobe_makes_the_holdout_inconclusive(across):
         assert read.inconclusive and read.lost > dchi2 and read.gain < 0  # a refusal without the rule
     else:
         assert not read.inconclusive and read.lost < dchi2 and read.share >= 0.25
+
+
+def test_a_camera_response_does_not_shrink_the_scanline_levels_chi2():
+    """The scanlines' diffuse levels carry the texture between them as a Gaussian process whose covariance is read
+    on the baseline's ρd, in the measured space. A camera response ``f_std (f/f_std)^{1+ε}`` maps the values back
+    before ρd is profiled and shrinks every level's deviation by its slope: with the covariance fixed, an untouched
+    wood desk read that as evidence (γ named on the levels alone, its values' Δχ² negative). Mapped back by the
+    chain's slope, the levels' χ² of a null reads the same whatever ε; it would read ``1/(1+ε)²`` of it."""
+    import jax
+    import jax.numpy as jnp
+
+    from wardjax.effects import ScanlineModel
+    from wardjax.effects._library import GammaMismatch
+
+    rng = np.random.default_rng(5)
+    s_n, n, c_n = 24, 16, 3
+    levels = 0.3 * (1.0 + 0.1 * rng.standard_normal(s_n))  # ρd per scanline: texture between scanlines
+    y = np.broadcast_to(levels[:, None, None] / np.pi, (s_n, n, c_n)) * (
+        1.0 + 0.002 * rng.standard_normal((s_n, n, c_n))
+    )
+    ang = np.linspace(0.2, 0.8, n)
+    wi = np.broadcast_to(np.stack([np.zeros_like(ang), np.sin(ang), np.cos(ang)], -1), (s_n, n, 3))
+    wo = np.broadcast_to(np.stack([np.zeros_like(ang), -np.sin(ang), np.cos(ang)], -1), (s_n, n, 3))
+    from wardjax.effects import scanline_data
+
+    base = scanline_data(y, wi, wo, 0.002 * y)
+    a = np.full(c_n, 1.0 / (c_n * 0.3))  # ℓ = ρd a, relative to the baseline's mean
+    P = (np.eye(s_n) - 1.0 / s_n) / 0.03  # the levels' deviations from their mean, in units of their SD
+    data = dataclasses.replace(base, levels=(P, a))
+    model, fx = ScanlineModel(), (GammaMismatch(),)
+
+    def chi2(eps):
+        vals = {"model": {"rho_s": 1e-6, "alpha": 0.1}, "gamma": {"eps": eps}}
+        r = model.residuals(vals, {"gamma": True}, fx, data)
+        return jnp.sum(r[y.size :] ** 2)
+
+    with jax.enable_x64(True):
+        levels = jax.jit(chi2)
+        levels_chi2 = lambda eps: float(levels(jnp.asarray(eps, jnp.float64)))
+        ref = levels_chi2(0.0)
+        assert ref > 10.0  # the texture between scanlines is there
+        for eps in (-0.2, 0.3):
+            assert abs(levels_chi2(eps) / ref - 1.0) < 0.02, eps

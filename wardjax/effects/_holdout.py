@@ -129,12 +129,7 @@ class Holdout:
         solve with nothing free: the values' whitened residuals and the scanline levels' ``P ℓ``, ``ℓ = ρd a``.
         """
         view = search.residual_view(dataclasses.replace(st, u=np.asarray(u)))
-        chi2 = float(np.sum(view.r**2))
-        levels = search.data.levels
-        if levels is not None and view.rho is not None:
-            P, a = (np.asarray(x) for x in levels)
-            chi2 += float(np.sum((P @ (view.rho[:, 0, :] @ a)) ** 2))
-        return chi2
+        return float(np.sum(view.r**2)) + view.levels_chi2
 
     @staticmethod
     def _train(search, st: FitState, anchor):
