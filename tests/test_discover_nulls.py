@@ -3,6 +3,7 @@ second opinion names a winner only where it earns its parameters there too (no p
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -118,3 +119,193 @@ def test_a_dominant_candidate_does_not_jump_ahead_of_one_it_does_not_dominate():
     assert [c.effect for c in _dominant_first([gamma, aniso, ramp])] == ["anisotropy", "gamma", "ramp"]
     # without the anisotropy the dominant ramp leads γ, as before
     assert [c.effect for c in _dominant_first([gamma, ramp])] == ["ramp", "gamma"]
+
+
+def _floor_capture(floor_level: float, rng: np.random.Generator, b: int = 2, cut: float = 0.002, sd: float = 0.001):
+    """Pixels of ``2 b`` × ``8 b`` scanlines whose signal falls from a highlight (0.5) to ``floor_level`` (linear,
+    full scale 1), noise ``sd``, masked where the noisy signal is below ``cut`` (the reconstruction's noise floor),
+    binned ``b × b`` as :func:`wardjax.reconstruct.bin_scanlines` bins them (a bin needs half its pixels).
+
+    Returns the bins' values, their true means, the fraction of their pixels below the cut (scanlines first), and
+    the bins' noise SD."""
+    from wardjax.effects._floor import floor_fraction
+
+    h, w = 96 * b, 16 * b  # rows along a scanline (an image column), columns
+    u = np.linspace(0.0, 1.0, h)[:, None] * np.ones((1, w))
+    true = floor_level + (0.5 - floor_level) * np.exp(-((u / 0.15) ** 2))
+    v = true + sd * rng.standard_normal(true.shape)
+    low = v < cut
+    vals = np.where(low, np.nan, v)
+    blocks = lambda a: a.reshape(h // b, b, w // b, b).swapaxes(1, 2).reshape(h // b, w // b, b * b)
+    n = np.sum(~blocks(low), axis=-1)
+    mean = np.where(n >= b * b / 2, np.nansum(blocks(vals), axis=-1) / np.maximum(n, 1), np.nan)
+    frac = floor_fraction(low, np.ones_like(low), (slice(0, h), slice(0, w)), b)
+    return mean.T[..., None], blocks(true).mean(-1).T[..., None], frac, sd / b
+
+
+@pytest.mark.parametrize("floor_level", [0.0015, 0.0025, 0.004])
+def test_values_the_noise_floor_biased_are_dropped(floor_level):
+    """The reconstruction masks pixels whose lamp signal is below the noise floor. Where the true signal sits within
+    a few noise SDs of it (a dark glossy metal's diffuse floor) the survivors are those the noise pushed up: the
+    truncated normal's mean ``μ + σ φ(a)/(1 − Φ(a))``. Kept, those values read as a rise away from the highlight
+    (named retroreflection on the metal); dropped, what is left is unbiased to a tenth of its noise."""
+    from scipy.stats import norm
+
+    from wardjax.effects._floor import floor_biased
+
+    rng = np.random.default_rng(7)
+    f, true, frac, sd = _floor_capture(floor_level, rng)
+    ok = np.isfinite(f)
+    tail = ok & (true < 3 * 0.002)
+    a = (0.002 - floor_level) / 0.001  # the truncation point in pixel SDs
+    expected = 0.001 * norm.pdf(a) / norm.sf(a)  # the truncated normal's rise
+    assert np.mean((f - true)[tail]) > 0.3 * expected  # the bias is there before
+    drop = floor_biased(f, frac)
+    kept = ok & ~drop
+    assert kept[true > 0.05].all()  # the highlight's flanks are kept
+    z = (f - true)[kept] / sd
+    assert abs(np.mean(z)) < 4.0 / np.sqrt(z.size) + 0.1, np.mean(z)
+
+
+def test_a_floor_the_noise_never_reaches_drops_nothing():
+    """A capture whose diffuse floor is far above the noise floor (every material but the dark metal of the null
+    bench) loses no value."""
+    from wardjax.effects._floor import floor_biased
+
+    f, _, frac, _ = _floor_capture(0.05, np.random.default_rng(1))
+    assert not frac.any() and not floor_biased(f, frac).any()
+
+
+@dataclasses.dataclass
+class _LobeData:
+    """A toy scanline capture for the hold-out: ``(S, N, 1)`` values, mask, no scanline levels."""
+
+    y: np.ndarray
+    mask: np.ndarray
+    levels: None = None
+
+
+class _LobeSearch:
+    """The hold-out's view of a search, on a toy lobe ``ρ_s + A exp(−x²/2wx² − t²/2wy²)``, unit noise.
+
+    ``u = (log A, log w, b)``: the current model has ``wx = wy = w``; the effect (``b`` active) stretches the lobe
+    along the scanline, ``wy = w eᵇ`` (anisotropy). ρ per scanline is profiled in closed form; the fit is
+    ``scipy.optimize.least_squares`` over the free parameters, with a unit prior about ``u0`` (the layout's initial
+    values, where :class:`~wardjax.effects._holdout.Holdout` centres every refit's)."""
+
+    def __init__(self, data: _LobeData, x: np.ndarray, t: np.ndarray, u0: np.ndarray):
+        from types import SimpleNamespace
+
+        self.data, self.x, self.t = data, x, t
+        self.layout = SimpleNamespace(u_initial=lambda: u0)
+
+    def _r(self, u, active) -> np.ndarray:
+        wy = math.exp(u[1] + (u[2] if 2 in active else 0.0))
+        lobe = math.exp(u[0]) * np.exp(-0.5 * (self.x[:, None] / math.exp(u[1])) ** 2 - 0.5 * (self.t / wy) ** 2)
+        m = self.data.mask[..., 0]
+        e = np.where(m, self.data.y[..., 0] - lobe, 0.0)
+        rho = e.sum(1, keepdims=True) / np.maximum(m.sum(1, keepdims=True), 1)
+        return np.where(m, e - rho, 0.0)
+
+    def residual_view(self, st):
+        from types import SimpleNamespace
+
+        return SimpleNamespace(r=self._r(st.u, st.active), rho=None, levels_chi2=0.0)
+
+    def fit(self, jobs):
+        from scipy.optimize import least_squares
+
+        out = []
+        for u, free, active, anchor in jobs:
+            u = np.array(u, float)
+            at = self.layout.u_initial() if anchor is None else np.asarray(anchor)
+
+            def res(v, u=u, free=free, active=active, at=at):  # a unit prior about the anchor, as the fits have
+                w = u.copy()
+                w[list(free)] = v
+                return np.concatenate([self._r(w, active).ravel(), v - at[list(free)]])
+
+            u[list(free)] = least_squares(res, u[list(free)]).x
+            out.append((u, float(np.sum(self._r(u, active) ** 2))))  # as _Search.fit's rows begin: u, χ²
+        return out
+
+    def refine(self, r, active):
+        return r
+
+
+def _state(u, chi2, active):
+    from wardjax.effects._report import FitState
+
+    free = (0, 1, 2) if 2 in active else (0, 1)
+    return FitState(np.asarray(u, float), chi2, 0, 1.0, True, np.eye(3), tuple(active), {}, {}, free)
+
+
+@pytest.mark.parametrize("across", [1.5, 8.0])
+def test_a_fold_that_cannot_pin_the_lobe_makes_the_holdout_inconclusive(across):
+    """A lobe narrow across the scanlines (SD 1.5 scanlines, its peak in one fold only: a fold without the scanlines
+    nearest the stripline) cannot be pinned by the other fold: the current model refitted there loses more held-out
+    χ² than the present effect (the lobe stretched 15 % along the scanline) is worth, and the held-out gain swings
+    by thousands either way with the refits' lobe misfit (here −4,000 for a Δχ² of 280). The read is inconclusive
+    and vetoes nothing. A lobe wide across the scanlines (SD 8) is pinned by both folds: the read is conclusive, and
+    the present effect passes on its held-out gain."""
+    from wardjax.effects._holdout import Holdout
+
+    rng = np.random.default_rng(3)
+    s_n, n = 32, 40
+    x, t = np.arange(s_n) - 12.0, np.linspace(-4.0 * across, 4.0 * across, n)
+    truth = 60.0 * np.exp(-0.5 * (x[:, None] / across) ** 2 - 0.5 * (t / (1.15 * across)) ** 2)
+    data = _LobeData((2.0 + truth + rng.standard_normal((s_n, n)))[..., None], np.ones((s_n, n, 1), bool))
+    u0 = np.array([math.log(50.0), math.log(across), 0.0])
+    search = _LobeSearch(data, x, t, u0)
+    cur, new = (_state(*search.fit([(u0, free, on, None)])[0], on) for free, on in (((0, 1), ()), ((0, 1, 2), (2,))))
+    dchi2 = cur.chi2 - new.chi2
+    assert dchi2 > 100.0  # the stretch is present and decisive in sample
+    read = Holdout(lambda d: _LobeSearch(d, x, t, u0), data)(cur, new, dchi2)
+    assert read is not None and read.passed
+    if across < 2:
+        assert read.inconclusive and read.lost > dchi2 and read.gain < 0  # a refusal without the rule
+    else:
+        assert not read.inconclusive and read.lost < dchi2 and read.share >= 0.25
+
+
+def test_a_camera_response_does_not_shrink_the_scanline_levels_chi2():
+    """The scanlines' diffuse levels carry the texture between them as a Gaussian process whose covariance is read
+    on the baseline's ρd, in the measured space. A camera response ``f_std (f/f_std)^{1+ε}`` maps the values back
+    before ρd is profiled and shrinks every level's deviation by its slope: with the covariance fixed, an untouched
+    wood desk read that as evidence (γ named on the levels alone, its values' Δχ² negative). Mapped back by the
+    chain's slope, the levels' χ² of a null reads the same whatever ε; it would read ``1/(1+ε)²`` of it."""
+    import jax
+    import jax.numpy as jnp
+
+    from wardjax.effects import ScanlineModel
+    from wardjax.effects._library import GammaMismatch
+
+    rng = np.random.default_rng(5)
+    s_n, n, c_n = 24, 16, 3
+    levels = 0.3 * (1.0 + 0.1 * rng.standard_normal(s_n))  # ρd per scanline: texture between scanlines
+    y = np.broadcast_to(levels[:, None, None] / np.pi, (s_n, n, c_n)) * (
+        1.0 + 0.002 * rng.standard_normal((s_n, n, c_n))
+    )
+    ang = np.linspace(0.2, 0.8, n)
+    wi = np.broadcast_to(np.stack([np.zeros_like(ang), np.sin(ang), np.cos(ang)], -1), (s_n, n, 3))
+    wo = np.broadcast_to(np.stack([np.zeros_like(ang), -np.sin(ang), np.cos(ang)], -1), (s_n, n, 3))
+    from wardjax.effects import scanline_data
+
+    base = scanline_data(y, wi, wo, 0.002 * y)
+    a = np.full(c_n, 1.0 / (c_n * 0.3))  # ℓ = ρd a, relative to the baseline's mean
+    P = (np.eye(s_n) - 1.0 / s_n) / 0.03  # the levels' deviations from their mean, in units of their SD
+    data = dataclasses.replace(base, levels=(P, a))
+    model, fx = ScanlineModel(), (GammaMismatch(),)
+
+    def chi2(eps):
+        vals = {"model": {"rho_s": 1e-6, "alpha": 0.1}, "gamma": {"eps": eps}}
+        r = model.residuals(vals, {"gamma": True}, fx, data)
+        return jnp.sum(r[y.size :] ** 2)
+
+    with jax.enable_x64(True):
+        levels = jax.jit(chi2)
+        levels_chi2 = lambda eps: float(levels(jnp.asarray(eps, jnp.float64)))
+        ref = levels_chi2(0.0)
+        assert ref > 10.0  # the texture between scanlines is there
+        for eps in (-0.2, 0.3):
+            assert abs(levels_chi2(eps) / ref - 1.0) < 0.02, eps

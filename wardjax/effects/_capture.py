@@ -40,6 +40,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..capture import CAPTURE_FILE, Capture, CaptureError
+from ._floor import floor_biased, floor_fraction
 from ._models import ScanlineData, inv_irradiance, scanline_data
 from ._noise import noise_columns
 from ._standard_noise import standard_noise_share
@@ -103,7 +104,9 @@ def capture_data(cap: Capture, *, max_samples: int = 20_000, band_rows: int = 51
     mean of its values and bounds, a lower bound on its true mean
     (:func:`wardjax.pipeline._bin_scanlines`). A scanline is kept if it has
     ``MIN_SCANLINE_SAMPLES`` uncensored values (ρd is profiled from those);
-    the noise model is fitted to uncensored triples only.
+    the noise model is fitted to uncensored triples only. Values the noise
+    floor's cut biased upwards (the dim tail of a scanline where pixels fell
+    below ``fit.noise_floor``) are dropped (:mod:`~wardjax.effects._floor`).
 
     Parameters
     ----------
@@ -116,6 +119,7 @@ def capture_data(cap: Capture, *, max_samples: int = 20_000, band_rows: int = 51
     """
     from ..reconstruct import (
         MIN_SCANLINE_SAMPLES,
+        MaskReason,
         bin_scanlines,
         check_measured,
         check_probe,
@@ -133,6 +137,9 @@ def capture_data(cap: Capture, *, max_samples: int = 20_000, band_rows: int = 51
     check_measured(cap, mask_counts(rec.probe, rec.flags), int((rec.probe & np.isfinite(rec.f_r).all(-1)).sum()))
     bins = bin_scanlines(rec, max_samples)  # scanlines = image columns
     F, cens = bins.f_r, bins.censored
+    # values the noise floor's cut biased upwards are no evidence (wardjax.effects._floor)
+    low = (rec.flags & MaskReason.BELOW_NOISE) > 0
+    F = np.where(floor_biased(F, floor_fraction(low, rec.probe, bins.box, bins.b)) & ~cens, np.nan, F)
     keep = np.sum(np.all(np.isfinite(F) & ~cens, axis=-1), axis=1) >= MIN_SCANLINE_SAMPLES  # uncensored values
     if not keep.any():
         raise CaptureError(cfg.images.lit, None, f"no image column holds {MIN_SCANLINE_SAMPLES} usable probe values")

@@ -537,7 +537,33 @@ class ScanlineModel:
         if data.levels is None:
             return r.reshape(-1)
         P, a = data.levels
-        return jnp.concatenate([r.reshape(-1), P @ (rho[:, 0, :] @ a)])
+        return jnp.concatenate(
+            [r.reshape(-1), P @ (rho[:, 0, :] @ a) / self._level_slope(vals, active, effects, data, ctx)]
+        )
+
+    def _level_slope(self, vals, active, effects, data, ctx):
+        """The measurement chain's mean slope ``D = ⟨∂M⁻¹/∂y⟩`` at the baseline's mean diffuse level (1 without one).
+
+        The levels' Gaussian process (:mod:`~wardjax.effects._levels`) is measured on the baseline's ρd, which are
+        in the measured space. A measurement effect maps the values back before ρd is profiled, and so stretches
+        every scanline's deviation from the mean level by its slope ``D``: a response ``f_std (f/f_std)^{1+ε}``
+        shrinks them by ``1/(1+ε)``, which the fixed covariance read as a better fit by ``(1 − D²) χ²_levels``
+        whatever the data (an untouched wood desk named γ on the levels alone, its values' Δχ² negative). The
+        levels' residuals are divided by ``D``, the first-order Jacobian back to the measured space; a
+        multiplicative field keeps its trend across the scanlines (``D`` is its mean), an offset its level.
+        """
+        P, a = data.levels
+        y0 = jnp.where(a > 0, 1.0 / (jnp.pi * a.shape[0] * jnp.where(a > 0, a, 1.0)), 1.0)  # ρ̄d/π per channel
+
+        def step(e, yd):
+            y, d = e.unmeasure(vals[e.name], yd[0], ctx)
+            return y, yd[1] * d
+
+        yd = (jnp.broadcast_to(y0, data.y.shape), jnp.ones(data.y.shape))
+        for e in reversed(effects):
+            yd = _gated(_switch(active, e, "unmeasure"), lambda yd, e=e: step(e, yd), yd)
+        w = jnp.where(data.mask, 1.0, 0.0)
+        return jnp.maximum(jnp.sum(w * jnp.abs(yd[1])) / jnp.maximum(jnp.sum(w), 1.0), 1e-12)
 
     def predict(self, vals, active, effects, data):
         """Prediction of the measured values ``(S, N, C)``, profiled ρd ``(S, 1, C)``, censored mask."""

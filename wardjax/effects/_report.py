@@ -43,11 +43,15 @@ class FitState:
 
 class HoldoutRead(NamedTuple):
     """The two-fold hold-out of one winner (:mod:`wardjax.effects._holdout`): ``gain``, the held-out ``χ²`` it
-    removed over both folds, its ``share`` of the in-sample Δχ², and whether it ``passed``."""
+    removed over both folds, its ``share`` of the in-sample Δχ², and whether it ``passed`` (may be named: the gain
+    sufficed, or the read is ``inconclusive``: a fold's refit of the current model alone ``lost`` more held-out
+    χ² than the winner's Δχ²)."""
 
     gain: float
     share: float
     passed: bool
+    inconclusive: bool = False
+    lost: float = math.nan
 
 
 class VariogramRead(NamedTuple):

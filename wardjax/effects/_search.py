@@ -35,6 +35,7 @@ class _View(NamedTuple):
     pred: np.ndarray
     covs: dict
     rho: np.ndarray | None = None  # profiled ρd (S, 1, C) of a scanline model
+    levels_chi2: float = 0.0  # the scanline levels' share of χ² (wardjax.effects._levels)
 
 
 class _Search:
@@ -138,7 +139,7 @@ class _Search:
         """Whitened residuals, prediction and covariates of ``st``: what the structure tests and plots read."""
         act = np.array([i in st.active for i in range(len(self.testable))], bool)
         with jax.enable_x64(True):  # the parameters too: outside, jnp.asarray would round them to float32
-            r, pred, rho = _residual_view(
+            r, pred, rho, lv = _residual_view(
                 jnp.asarray(st.u),
                 jnp.asarray(act),
                 self.data_dev,
@@ -147,7 +148,8 @@ class _Search:
                 layout_key=self.layout.key,
             )
         r, pred = np.asarray(r), np.asarray(pred)
-        return _View(st, r, pred, self.model.covariates(self.data, pred), None if rho is None else np.asarray(rho))
+        rho = None if rho is None else np.asarray(rho)
+        return _View(st, r, pred, self.model.covariates(self.data, pred), rho, float(lv))
 
 
 def _baseline_jobs(layout: _Layout, base: tuple[Param, ...]):

@@ -118,7 +118,7 @@ def _solve_batch(u0, a0, idx, kmask, active, prior_w, data, *, model, effects, l
 
 @functools.partial(jax.jit, static_argnames=("model", "effects", "layout_key"))
 def _residual_view(u, active, data, *, model, effects, layout_key):
-    """Whitened residuals of the values (flat), prediction and profiled ρd of one fitted state, in one program.
+    """Whitened residuals of the values (flat), prediction, profiled ρd and the scanline levels' χ², in one program.
 
     Run eagerly, the model's few dozen operations would each compile on their
     own (~76 small programs, ~3 s, per process and data shape).
@@ -127,8 +127,8 @@ def _residual_view(u, active, data, *, model, effects, layout_key):
     vals = _unpack(layout_key, u, names)
     act = {e.name: active[i] for i, e in enumerate(effects)}
     pred, rho, _ = model.predict(vals, act, effects, data)
-    r = model.residuals(vals, act, effects, data)[: pred.size]  # the values' (the scanline levels' follow)
-    return r, pred, rho
+    r = model.residuals(vals, act, effects, data)  # the values', then the scanline levels'
+    return r[: pred.size], pred, rho, jnp.sum(r[pred.size :] ** 2)
 
 
 def _job_rows(jobs, layout, n_e, width):
