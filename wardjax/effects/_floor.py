@@ -44,14 +44,10 @@ def floor_fraction(low: np.ndarray, probe: np.ndarray, box: tuple[slice, slice],
         ``(S, N)`` in ``[0, 1]``, the layout of :func:`wardjax.reconstruct.bin_scanlines` (image columns as
         scanlines).
     """
+    from ..reconstruct import bin_sums
 
-    def block_sum(a: np.ndarray) -> np.ndarray:
-        h, w = a.shape
-        a = np.pad(a.astype(np.float64), ((0, (-h) % b), (0, (-w) % b)))
-        return a.reshape(a.shape[0] // b, b, a.shape[1] // b, b).sum(axis=(1, 3))
-
-    n = block_sum(probe[box])
-    return (block_sum((low & probe)[box]) / np.maximum(n, 1.0)).T
+    n = bin_sums(probe[box], b)
+    return (bin_sums((low & probe)[box], b) / np.maximum(n, 1.0)).T
 
 
 def floor_biased(f: np.ndarray, fraction: np.ndarray) -> np.ndarray:

@@ -10,6 +10,7 @@ from ._bins import ScanlineBins as ScanlineBins
 from ._bins import bin_scanlines as bin_scanlines
 from ._bins import ScanlineBinner as ScanlineBinner
 from ._bins import bin_layout as bin_layout
+from ._bins import bin_sums as bin_sums
 from ._reference import MaskReason as MaskReason
 from ._reference import reconstruct_brdf as reconstruct_brdf
 from ._reference import sample_bilinear as sample_bilinear
@@ -28,6 +29,7 @@ __all__ = [
     "bin_scanlines",
     "ScanlineBinner",
     "bin_layout",
+    "bin_sums",
     "MaskReason",
     "reconstruct_brdf",
     "sample_bilinear",

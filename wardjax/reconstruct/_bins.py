@@ -9,7 +9,7 @@ import numpy as np
 
 from ._band import Reconstruction
 
-__all__ = ["MIN_SCANLINE_SAMPLES", "ScanlineBinner", "ScanlineBins", "bin_layout", "bin_scanlines"]
+__all__ = ["MIN_SCANLINE_SAMPLES", "ScanlineBinner", "ScanlineBins", "bin_layout", "bin_scanlines", "bin_sums"]
 
 # A scanline (image column) with fewer usable bins than this is not fitted.
 MIN_SCANLINE_SAMPLES = 8
@@ -27,6 +27,11 @@ def _pad_to(a: np.ndarray, b: int, fill) -> np.ndarray:
         return a
     pad = [(0, ph), (0, pw)] + [(0, 0)] * (a.ndim - 2)
     return np.pad(a, pad, constant_values=fill)
+
+
+def bin_sums(a: np.ndarray, b: int) -> np.ndarray:
+    """Sums of ``a`` over ``b × b`` bins, float64: ``(H, W, ...)`` → ``(⌈H/b⌉, ⌈W/b⌉, ...)``, padded with zeros."""
+    return _block_sum(_pad_to(a, b, 0).astype(np.float64), b)
 
 
 class ScanlineBins(NamedTuple):
