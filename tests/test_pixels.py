@@ -103,6 +103,25 @@ def test_clusters_two_materials_and_none_where_one():
     assert r1.n_lobes == 1 and r1.evidence["clusters"]["n_clusters"] == 1
 
 
+def test_flat_geometry_equals_the_per_pixel_frame():
+    """The boundary's geometry (one rotation for every pixel) is that of the per-pixel frames at the normal z."""
+    import jax
+    import jax.numpy as jnp
+
+    from wardjax.fit import _pixel_model as pm
+
+    rng = np.random.default_rng(0)
+    wi, wo = (x / np.linalg.norm(x, axis=-1, keepdims=True) for x in rng.normal(size=(2, 50, 4, 3)))
+    t = np.array([0.6, -0.8, 0.0])
+    with jax.enable_x64(True):
+        flat = jnp.broadcast_to(jnp.asarray([0.0, 0.0, 1.0]), (50, 3))
+        ref = pm.geometry(jnp.asarray(wi), jnp.asarray(wo), flat, jnp.asarray(t), NORM)
+        got = pm.flat_geometry(jnp.asarray(wi), jnp.asarray(wo), jnp.asarray(t), NORM)
+        assert np.mean(np.asarray(ref.q) > 0) > 0.1  # views on both sides of the horizon
+        for a, b in zip(got, ref):
+            np.testing.assert_allclose(np.asarray(a), np.asarray(b), rtol=1e-13, atol=1e-15)
+
+
 def test_bad_input_is_one_clear_line():
     f = np.ones((4, 3, 3))
     d = np.broadcast_to(np.array([0.0, 0.0, 1.0]), (4, 3, 3))

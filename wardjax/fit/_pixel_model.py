@@ -52,6 +52,7 @@ __all__ = [
     "PixelGeometry",
     "assign_costs",
     "basis",
+    "flat_geometry",
     "geometry",
     "lobe_covariance",
     "lobe_fit",
@@ -104,6 +105,19 @@ def geometry(wi: jax.Array, wo: jax.Array, normals: jax.Array, tangent: jax.Arra
     zi = wi[..., 2]
     q = jnp.where(geom.valid & (zi > _COS_EPS), li[..., 2] / jnp.where(zi > _COS_EPS, zi, 1.0), 0.0)
     return PixelGeometry(geom.u, geom.v, geom.g, q)
+
+
+def flat_geometry(wi: jax.Array, wo: jax.Array, tangent: jax.Array, normalization: str) -> PixelGeometry:
+    """:func:`geometry` at the flat normal ``z`` for every pixel, in one rotation of the directions.
+
+    The local frame is then the same for all pixels, ``(t, z × t, z)``: the directions are rotated by
+    one ``3 × 3`` matrix instead of projected on per-pixel axes, and ``q`` is 1 wherever the view is
+    valid. The same values as :func:`geometry` with ``normals = z``.
+    """
+    z = jnp.asarray([0.0, 0.0, 1.0], tangent.dtype)
+    rot = jnp.stack([tangent, jnp.cross(z, tangent), z])  # rows x', y', z
+    geom = ward_geometry(wi @ rot.T, wo @ rot.T, normalization)
+    return PixelGeometry(geom.u, geom.v, geom.g, jnp.where(geom.valid & (wi[..., 2] > _COS_EPS), 1.0, 0.0))
 
 
 def _theta2(theta: jax.Array) -> jax.Array:

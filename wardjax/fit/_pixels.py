@@ -468,13 +468,14 @@ def fit_pixels(
         raise ValueError(
             "normals=True needs lobe='shared' or 'clusters' (a per-pixel lobe and normal are not separable)"
         )
-    f, wi, wo, w, t = validate(f_r, wi, wo, weights, mask, tangent)
-    shape = None if height_field is None else check_image_shape(height_field, f.shape[0])
-    fixed = None if fixed_normals is None else check_normals(fixed_normals, f.shape[0], normals, lobe)
-    unweighted = weights is None
     with jax.enable_x64(True):
-        opts = _Options(lobe, model, n_clusters, normals, normalization, seed, unweighted, shape, fixed)
-        return _fit(f, wi, wo, w, t, opts)
+        f, wi, wo, w, t, geom, n_obs = validate(f_r, wi, wo, weights, mask, tangent, normalization)
+        shape = None if height_field is None else check_image_shape(height_field, f.shape[0])
+        fixed = None if fixed_normals is None else check_normals(fixed_normals, f.shape[0], normals, lobe)
+        if fixed is not None:
+            geom = _geometry(wi, wo, jnp.asarray(fixed), t, normalization)
+        opts = _Options(lobe, model, n_clusters, normals, normalization, seed, weights is None, shape, fixed)
+        return _fit((f, w, wi, wo), t, geom, n_obs, opts)
 
 
 class _Options(NamedTuple):
@@ -489,15 +490,13 @@ class _Options(NamedTuple):
     fixed: np.ndarray | None
 
 
-def _fit(f, wi, wo, w, t, opts: _Options) -> PixelFit:
+def _fit(data, t, geom, n_obs: int, opts: _Options) -> PixelFit:
+    """The fit of :func:`fit_pixels` on checked data ``(f, w, wi, wo)`` and its geometry at the starting normals."""
     lobe, model, n_clusters, normals, normalization, seed, unweighted = opts[:7]
+    f, w, wi, wo = data
     p, _, c = f.shape
     d = 1 if model == "isotropic" else 2
-    f, wi, wo, w, t = (jnp.asarray(x) for x in (f, wi, wo, w, t))
-    n_obs = int(jnp.sum(w > 0))
     ln_n = math.log(max(n_obs, 2))
-    flat = jnp.broadcast_to(jnp.asarray([0.0, 0.0, 1.0]), (p, 3))
-    geom = _geometry(wi, wo, flat if opts.fixed is None else jnp.asarray(opts.fixed), t, normalization)
     labels = jnp.zeros(p, jnp.int32)
     sub = pixel_sample(p, seed)  # the lobes are searched for on a sample, then refined on all (._pixel_sample)
     geom_s, f_s, w_s = take(sub, geom, f, w)
@@ -509,7 +508,6 @@ def _fit(f, wi, wo, w, t, opts: _Options) -> PixelFit:
         shared = pm.lobe_fit(shared[0], labels, geom, f, w, n_lobes=1, steps=POLISH)
     theta, s, chi2_l = shared
     evidence: dict = {} if fast else {"chi2_shared": float(jnp.sum(chi2_l))}
-    data = (f, w, wi, wo)
 
     normal_map = None
     keep = jnp.zeros(p, bool)
