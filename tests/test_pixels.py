@@ -122,6 +122,31 @@ def test_flat_geometry_equals_the_per_pixel_frame():
             np.testing.assert_allclose(np.asarray(a), np.asarray(b), rtol=1e-13, atol=1e-15)
 
 
+def test_boundary_reads_float32_and_masks_unusable_views():
+    """The compiled boundary pass: float32 values read as float64 without change, a NaN value or a view
+    below the horizon given zero weight (and counted out of ``n``), a masked view likewise."""
+    import jax
+
+    from wardjax.fit._pixel_checks import validate
+
+    rng = np.random.default_rng(1)
+    f = rng.random((5, 4, 3)).astype(np.float32)
+    f[0, 1, 2] = np.nan
+    d = np.broadcast_to(np.array([0.6, 0.0, 0.8]), (5, 4, 3)).copy()
+    d[1, 2] = [0.6, 0.0, -0.8]  # a light below the horizon
+    mask = np.ones((5, 4), bool)
+    mask[2, 3] = False
+    with jax.enable_x64(True):
+        f64, _, _, w, _, _, n_obs = validate(f, d, d, None, mask, None, NORM)
+    assert f64.dtype == np.float64 and w.dtype == np.float64
+    usable = np.ones((5, 4, 3), bool)
+    usable[0, 1, 2] = False
+    usable[1, 2] = usable[2, 3] = False
+    np.testing.assert_array_equal(np.asarray(w) > 0, usable)
+    np.testing.assert_array_equal(np.asarray(f64)[usable], f.astype(np.float64)[usable])
+    assert n_obs == int(usable.sum())
+
+
 def test_bad_input_is_one_clear_line():
     f = np.ones((4, 3, 3))
     d = np.broadcast_to(np.array([0.0, 0.0, 1.0]), (4, 3, 3))
