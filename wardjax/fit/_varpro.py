@@ -42,7 +42,7 @@ import jax.numpy as jnp
 from jaxtyping import Array, Float, Int
 
 from .._status import Status
-from ._sandwich import sandwich_covariance
+from ._sandwich import sandwich_covariance, sandwich_pass, sum_samples
 
 # Search range of α. Below 1e-4 no camera resolves a lobe; above 2 the lobe is
 # flat over the hemisphere and α no longer has a meaning.
@@ -467,7 +467,14 @@ def covariance(theta, st: Stats, p: Prepared, scale):
 
 
 def curvature_check(theta, chi2, s_hat, p: Prepared, cov, scale, e):
-    """Is the Gauss–Newton covariance trustworthy here? ``1`` where it is not (isotropic fits).
+    """Is the Gauss–Newton covariance trustworthy here? ``1`` where it is not (isotropic fits):
+    :func:`curvature_pass`'s sums over the samples, then its verdict."""
+    terms, verdict = curvature_pass(theta, chi2, s_hat, p, cov, scale, e)
+    return verdict(sum_samples(terms))
+
+
+def curvature_pass(theta, chi2, s_hat, p: Prepared, cov, scale, e):
+    """The curvature check's per-sample terms and its verdict on their sums: ``(terms, verdict)``.
 
     The profiled χ² (the sums of :func:`stats` without derivatives) at two points about one standard
     error either side of the optimum, both from one pass over the samples. At a fixed roughness the
@@ -491,7 +498,9 @@ def curvature_check(theta, chi2, s_hat, p: Prepared, cov, scale, e):
     ``64 ε K₀ / (χ²/dof)``, which matters in float32 only): the likelihood is not quadratic
     over one standard error (a lobe spanning few samples, a weakly detected lobe), and
     :func:`wardjax.fit._profile.profile_errors` replaces the standard errors of ρs and α by
-    profile-likelihood ones.
+    profile-likelihood ones. ``verdict(sums)`` returns ``1`` where the check fails; the sums may
+    come from one reduction shared with other passes over the same samples
+    (:func:`solve_scanline` folds the sandwich's in).
     """
     alpha = jnp.exp(theta[0])
     var_s, var_a, cov_sa = cov[3, 3], cov[4, 4], cov[3, 4]
@@ -508,15 +517,17 @@ def curvature_check(theta, chi2, s_hat, p: Prepared, cov, scale, e):
     # Where d underflows (κ t/α² > 700) so does e: that sample's lobe is nil at both points.
     ends = ((1.0, -0.5 * jnp.log1p(-kappa), jnp.where(d > 0, e / jnp.where(d > 0, d, 1.0), 0.0)),)
     ends += ((-1.0, 0.5 * jnp.log1p(kappa), e * d),)
-    # Both points' sums at once: three mat-vecs against the pair of exponentials (and their squares).
     # Both points' sums (``Σ gw e'`` per column, ``Σ gwf e'``, ``Σ g2w e'²``) in one variadic reduction:
     # one loop that reads the streams once, where a mat-vec per sum re-read them (XLA's cost analysis:
     # 18 MB of memory traffic for the check of 1,024 scanlines of 256 samples, not 50 MB).
     terms = []
     for _, _, e_t in ends:
         terms += [*(p.gw * e_t[None, :]), p.gwf * e_t, p.g2w * e_t * e_t]
-    zeros = tuple(jnp.zeros((), e.dtype) for _ in terms)
-    sums = jax.lax.reduce(tuple(terms), zeros, lambda a, b: tuple(x + y for x, y in zip(a, b)), (0,))
+    return terms, lambda sums: _verdict(sums, theta, chi2, s_hat, p, scale, ends, sd_t, sd_s, sign_r, corner)
+
+
+def _verdict(sums, theta, chi2, s_hat, p: Prepared, scale, ends, sd_t, sd_s, sign_r, corner):
+    """:func:`curvature_pass`'s verdict from its sums: ``1`` where a rise is off its prediction."""
     c_ = p.gw.shape[0]
     bsums = jnp.stack([jnp.stack(sums[j * (c_ + 2) : j * (c_ + 2) + c_]) for j in range(2)], -1)  # (C, 2)
     psums = jnp.stack([sums[j * (c_ + 2) + c_] for j in range(2)])
@@ -611,12 +622,22 @@ def solve_scanline(
             jnp.where(at_bound, Status.AT_BOUND, jnp.where(small, Status.CONVERGED, Status.MAX_STEPS)),
         ),
     )
-    nonlinear = curvature_check(theta, st.chi2, s, p, cov, scale, e) if iso and check else jnp.zeros((), jnp.int32)
-    nonlinear = jnp.where(status == Status.CONVERGED, 2 * nonlinear, 0)  # 2: the profile is pending
-    reported = cov
+    # The curvature check and the sandwich, both sums over the samples at the optimum: one reduction,
+    # so that the samples are read once for both.
+    passes = []
+    if iso and check:
+        passes.append(curvature_pass(theta, st.chi2, s, p, cov, scale, e))
     if raw is not None:
         mean = p.fbar - s * jnp.broadcast_to(st.bbar, (3,))
-        reported = sandwich_covariance(theta, s, cov, scale, *raw, mean=mean, e=e)
+        passes.append(sandwich_pass(theta, s, cov, scale, *raw, mean=mean, e=e))
+    sums = sum_samples([t for terms, _ in passes for t in terms]) if passes else ()
+    done = []
+    for terms, finish in passes:
+        done.append(finish(sums[: len(terms)]))
+        sums = sums[len(terms) :]
+    nonlinear = done.pop(0) if iso and check else jnp.zeros((), jnp.int32)
+    nonlinear = jnp.where(status == Status.CONVERGED, 2 * nonlinear, 0)  # 2: the profile is pending
+    reported = done.pop(0) if raw is not None else cov
     status = status.astype(jnp.int32)
     return ScanlineSolution(rho_d, s, jnp.exp(theta), reported, st.chi2, dof, status, nonlinear, cov)
 
