@@ -367,6 +367,11 @@ def _step(state, cur, remaining, radial_first, data, ln_n, alpha, i, progress) -
             if on_held is not None:
                 progress(f"step {i}: {c.effect} refitted with the structure")
                 fit = refit_with_structure(state.plus(c.effect), data, cur.shared, fit)
+                # the structure refitted (its count chosen anew) may lose what the gain won on it held: the effect
+                # is added only if the refit lowers the gap (χ²/dof), what the steps report
+                if fit.gap >= cur.gap:
+                    progress(f"step {i}: {c.effect} refitted with the structure does not lower the gap; not added")
+                    continue
             elif normals_held is not None:
                 progress(f"step {i}: {c.effect} refitted with its normals")
                 fit = fit_state(state.plus(c.effect), data, start=cur.shared)
