@@ -34,12 +34,13 @@ def baseline_residuals(folder: Path):
     from wardjax.effects import ScanlineModel
     from wardjax.effects import _discover as d
     from wardjax.effects._capture import capture_data
+    from wardjax.effects._search import _Search
 
     cap = load_capture(folder)
     data = capture_data(cap)
     model = ScanlineModel(cap.config.fit.normalization)
     testable, _ = d._split_library(model, data, None)
-    search = d._Search(model, data, testable, 60, 64)
+    search = _Search(model, data, testable, 60, 64)
     cur = search.residual_view(d._fit_baseline(search))
     y, m = np.asarray(data.y), np.asarray(data.mask)
     pred = np.asarray(cur.pred)

@@ -121,6 +121,11 @@ def test_06_a_radial_step_on_a_model_with_structure_is_scored_held_then_refitted
     assert found.fit.pixel is not None and found.fit.chi2 < cur.chi2 - found.chosen.delta_chi2 / 2
     a1, _ = found.fit.shared.effects["vignetting"]
     assert a1 < -0.1  # the hidden 1 − 0.3 r² + 0.05 r⁴: darker at the edge
+    # the renders hold one material: its lobes per cluster stood in for the vignetting, and with the gain in the
+    # model one lobe is left (the gains refitted on it, not kept as fitted for the three it had)
+    assert cur.pixel.evidence["clusters"]["n_clusters"] > 1
+    assert found.fit.pixel.evidence["clusters"]["n_clusters"] == 1
+    assert found.fit.gap < 1 + 3 * np.sqrt(2 / found.fit.dof)  # the noise: ρd per block, one lobe, the gain
 
 
 @pytest.mark.slow  # two wj.fit_pixels fits with normals and clusters, compiled in the worker (about 60 s)
@@ -136,3 +141,25 @@ def test_07_lobes_per_cluster_are_scored_at_the_current_normals(vignetted):
     kept = cur.pixel.evidence["normals"]["n_pixels"]
     assert new.dof == new.pixel.dof - 2 * kept  # the held normals still counted as parameters
     assert new.chi2 <= cur.chi2 * (1 + 1e-3)  # lobes per cluster at the same normals fit no worse
+
+
+@pytest.mark.slow  # a 16² × 9 bumpy render, two normal-map fits and their hold-out (about 3 min)
+def test_08_a_bumpy_multiview_sample_takes_its_normals_on_one_height_field(tmp_path):
+    from benchmarks.photo_diagnose import NOISE_GAIN, NOISE_READ
+    from wardjax.render import flash_views
+    from wardjax.simulate import FlashNoise, simulate_flash_views
+
+    one = ((0.4, 0.3, 0.2), (0.4, 0.3, 0.2))  # one material, bumps of slope up to ±0.15
+    scene = flash_views((16, 16), rho_d=one, rho_s=(0.08, 0.08), alpha=(0.12, 0.12), bump_amplitude=0.6)
+    simulate_flash_views(scene, tmp_path / "src", noise=FlashNoise(NOISE_READ, NOISE_GAIN), seed=0)
+    wj.import_capture(tmp_path / "src", tmp_path / "cap")
+    with open(tmp_path / "cap" / "capture.toml", "a") as fh:
+        fh.write(f"\n[noise]\nread = {NOISE_READ}\nshot = {NOISE_GAIN}\n")
+    data = photo_data(wj.load_capture(tmp_path / "cap"))
+    rep = discover_photo(data, candidates=("normals", "height_field"), name="bumps")
+    # the bumps are a height field: its normals cost a height per pixel (255), free ones two slopes (512)
+    assert rep.found == ["height_field"] and rep.within_noise, rep.verdict()
+    step = rep.steps[0]
+    ks = {c.effect: c.k for c in step.candidates}
+    assert ks == {"height_field": 16 * 16 - 1, "normals": 2 * 16 * 16}
+    assert step.evidence.holdout is not None and step.evidence.holdout.passed  # and it predicts the other views

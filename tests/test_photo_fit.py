@@ -25,6 +25,7 @@ import wardjax as wj
 from wardjax._files import encode_image, read_image, write_image
 from wardjax.run._cli import main
 from wardjax.run._heldout_figure import heldout_figure
+from wardjax.run._photo_verdict import physical_verdict
 
 DATA = Path(__file__).parent / "data" / "flash"
 NOISE = 0.004
@@ -116,8 +117,14 @@ def test_02_cli_fit_hold_out_writes_the_panel(multiview, tmp_path):
             "towel: capture.toml: photo.iso: 400 contradicts the EXIF of point.jpg (ISOSpeedRatings = 100); "
             "correct or remove the field",
         ),
+        (
+            lambda t: t + '\nnormals = "height_field"\n',  # [fit] is the file's last table
+            [],
+            "towel: capture.toml: fit.normals: 'height_field' needs two photos or more fitted; green_towel has 1: "
+            "a normal per pixel and ρd varying across pixels make the same picture in one",
+        ),
     ],
-    ids=["hold-out of one photo", "EXIF contradicts"],
+    ids=["hold-out of one photo", "EXIF contradicts", "normals from one photo"],
 )
 def test_03_cli_bad_photo_capture_is_one_line_and_writes_nothing(tmp_path, edit, args, line):
     src = tmp_path / "towel"
@@ -130,14 +137,69 @@ def test_03_cli_bad_photo_capture_is_one_line_and_writes_nothing(tmp_path, edit,
     assert not (tmp_path / "fits" / "towel").exists()
 
 
+# The towel's fit is no material (docs/photographs.md): a diffuse cloth whose lobe stands in for the vignetting
+# and the flash's falloff, with a mean ρd below 0 in two channels. The others are materials.
+NOT_PHYSICAL = {"green_towel"}
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("name", sorted(p.name for p in DATA.iterdir() if (p / "capture.toml").is_file()))
 def test_04_each_real_photo_fitted_from_the_cli(tmp_path, name):
     r = CliRunner().invoke(main, ["fit", str(DATA / name), "--out", str(tmp_path)])
-    assert r.exit_code == 0, r.output
+    assert r.exit_code == 0, r.output  # a verdict on the capture is no failure of the run
     doc = json.loads((tmp_path / name / "params.json").read_text())
     assert doc["method"] == "flash" and doc["fit"]["dof"] > 0
     report = (tmp_path / name / "report.md").read_text()
     assert report.startswith(f"# {name} (flash, 1 photo)") and "| lobe | ρs | αx | αy |" in report
+    assert np.load(tmp_path / name / "maps.npz")["rho_d"].shape[2] == 3  # the estimate's maps, kept either way
+    if name in NOT_PHYSICAL:
+        # one line naming the capture, its photo, the parameters out of range with value ± σ; the report says the
+        # same; the material (ρd texture, params.json's radiance block) is not written with impossible values
+        (line,) = [x for x in r.output.splitlines() if "not a physical material" in x]
+        assert line == doc["fit"]["verdict"] and line in report
+        assert line.startswith(f"{name} (point.jpg): not a physical material: α = 1.28")
+        assert "mean ρd R = -0.12 ± " in line and "mean ρd B = -0.25" in line and line.endswith("no material exported")
+        assert doc["fit"]["status"] == "not_physical" and doc["params"]["rho_d"][0] < 0  # the estimate, as measured
+        assert doc["radiance"]["params"]["rho_s"] is None and "not a physical material" in doc["radiance"]["status"]
+        assert not (tmp_path / name / "rho_d.tif").exists() and "rho_d" not in doc["files"]
+        return
+    assert doc["fit"]["status"] == "converged" and doc["fit"]["verdict"] is None
+    assert not [x for x in r.output.splitlines() if "not a physical material" in x]
+    assert all(0 <= v <= 1 for v in doc["radiance"]["params"]["rho_d"])
     rho = read_image(tmp_path / name / "rho_d.tif", rgb=False)
     assert rho.shape[2] == 3 and np.isfinite(rho).mean() > 0.8
+
+
+def _lobe(rho_s, alpha, err=0.001):
+    return {
+        "rho_s": [rho_s],
+        "alpha_x": [alpha],
+        "alpha_y": [alpha],
+        **{k: [err] for k in ("rho_s_err", "alpha_x_err", "alpha_y_err")},
+    }
+
+
+def test_05_a_fit_out_of_the_physical_range_is_a_verdict_within_noise_a_bound():
+    rd, err = np.array([0.5, 0.3, 0.2]), np.full(3, 0.001)
+    v = physical_verdict(rd, err, _lobe(0.05, 0.15))
+    assert v.physical and not v.notes and v.material is not None
+    np.testing.assert_array_equal(v.material.rho_d, rd)
+    # 2 σ below 0: noise; the material takes the bound, and a note says so
+    v = physical_verdict(np.array([0.5, 0.3, -0.002]), err, _lobe(0.05, 0.15))
+    assert v.physical and v.material is not None and float(v.material.rho_d[2]) == 0.0
+    assert v.notes == ("mean ρd B = -0.002 ± 0.001 lies within 3 σ of 0: the material takes 0",)
+    # 5 σ below 0: a verdict naming the parameter with its value and σ, and nothing to export
+    v = physical_verdict(np.array([0.5, 0.3, -0.005]), err, _lobe(1.2, 0.15))
+    assert not v.physical and v.material is None
+    assert v.why == "ρs = 1.2 ± 0.001 > 1; mean ρd B = -0.005 ± 0.001 < 0"
+    assert v.line("towel", ["a.jpg"]).startswith("towel (a.jpg): not a physical material: ρs = 1.2")
+    # the σ hold only if the model fits: χ²/dof = 4 doubles them, and 5 σ become 2.5
+    v = physical_verdict(np.array([0.5, 0.3, -0.005]), err, _lobe(0.05, 0.15), chi2_per_dof=4.0)
+    assert v.physical and v.notes[0].startswith("mean ρd B = -0.005 ± 0.002 lies within 3 σ")
+    v = physical_verdict(rd, err, _lobe(0.05, 1.5))
+    assert not v.physical and v.why == "α = 1.5 ± 0.001 > 1"
+    # a ρd map below 0 beyond noise in more than a tenth of its values
+    m = np.broadcast_to(rd, (10, 10, 3)).copy()
+    m[:4, :, 0] = -0.1  # 40 of 300 values
+    v = physical_verdict(rd, err, _lobe(0.05, 0.15), rho_d_map=m, rho_d_map_err=np.full_like(m, 0.01))
+    assert not v.physical and v.why == "ρd < 0 beyond 3 σ in 13 % of the pixel values"

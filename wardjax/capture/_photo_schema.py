@@ -54,6 +54,8 @@ naming the file and the field.
     bin = 1                             # average bin × bin pixels before fitting
     block = 8                           # the pixels of a block × block square share ρd in the fit (one photo:
                                         # what makes the lobe identifiable); each pixel's ρd follows from the lobe
+    normals = "none"                    # "pixel": a normal per pixel; "height_field": tied to one height
+                                        # field (two photos or more)
 
 ``method = "multiview"`` — K rectified photos of the sample plane, each with
 its own camera and light (what ``wardjax import`` writes)::
@@ -153,6 +155,7 @@ class PhotoFitSection(_Section):
     bin: Annotated[int, Strict(), Field(ge=1, le=64)] = 1
     block: Annotated[int, Strict(), Field(ge=1, le=64)] = 1
     noise_floor: NonNegative = 0.002
+    normals: Literal["none", "pixel", "height_field"] = "none"
 
 
 Encoding = Literal["srgb", "gamma2.2", "linear"]

@@ -63,9 +63,11 @@ def unphysical(fit, state, data: PhotoData) -> str | None:
 def not_identifiable(data: PhotoData) -> dict[str, str]:
     """The candidates ``data`` cannot identify, each with the reason."""
     if data.n_photos == 1:
-        return {
-            "normals": "one photo: a normal per block and ρd varying inside the block make the same picture",
-        }
+        why = "one photo: a normal per block and ρd varying inside the block make the same picture"
+        return {"normals": why, "height_field": why}
+    rows, cols, _ = data.grid
+    if min(rows, cols) < 2:
+        return {"height_field": f"a height field needs a grid of 2 × 2 problems or more, got {rows} × {cols}"}
     return {}
 
 

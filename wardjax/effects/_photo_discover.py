@@ -56,7 +56,7 @@ from ._photo_checks import not_identifiable, residual_where, unphysical
 from ._photo_held import HeldStructure, chi2_gains_held, fit_gains_held
 from ._photo_model import RADIAL, PhotoData
 from ._photo_report import PhotoDiscoveryReport, PhotoStep, lobes_table
-from ._photo_states import STRUCTURAL, PhotoState, StateFit, fit_state, held_chi2
+from ._photo_states import NORMALS, STRUCTURAL, PhotoState, StateFit, fit_state, held_chi2
 from ._report import Candidate, HoldoutRead
 
 __all__ = ["PHOTO_EFFECTS", "discover_photo"]
@@ -78,6 +78,8 @@ def _k(name: str, fit: StateFit) -> int:
     ev = getattr(fit.pixel, "evidence", {})
     if name == "varying_specular":
         return 3 * (int(ev.get("clusters", {}).get("n_clusters", 1)) - 1)
+    if name == "height_field":  # a height per problem, less the constant
+        return int(np.shape(getattr(fit.pixel, "rho_d", ()))[0]) - 1
     return 2 * int(ev.get("normals", {}).get("n_pixels", 0))
 
 
@@ -120,6 +122,23 @@ class _Held(NamedTuple):
 
     structure: HeldStructure
     base: object  # SharedFit
+
+
+def refit_with_structure(state: PhotoState, data: PhotoData, start, gains_fit, rounds: int = 3) -> StateFit:
+    """A radial winner scored on a held structure, refitted in full: the structure (lobes, their count, normals)
+    at the held gains, then the gains on that new structure, alternately, while χ² falls; the best fit kept.
+
+    The gains of the held fit were made with the old structure, which had absorbed part of the gain (lobes per
+    cluster fitting a radial falloff, say); once the structure is refitted without that part (fewer clusters),
+    the gains must follow it, or the refit keeps a gain fitted for a structure it no longer has."""
+    best = fit_state(state, data, start=start, gains_from=gains_fit)
+    for _ in range(rounds - 1):
+        gains_fit = fit_gains_held(state.radial, data, HeldStructure.of(best.pixel, data), best.shared)
+        new = fit_state(state, data, start=start, gains_from=gains_fit)
+        if new.chi2 >= best.chi2 * (1 - 1e-6):
+            break
+        best = new
+    return best
 
 
 def _score_held(name: str, state: PhotoState, cur: StateFit, held: _Held, data: PhotoData, ln_n: float):
@@ -246,6 +265,8 @@ def discover_photo(
         if steps and _within_noise(cur):
             break
         remaining = [n for n in names if n not in (*state.radial, *state.structural)]
+        if state.normals:  # a normal per problem is in the model, free or on a height field: not the other
+            remaining = [n for n in remaining if n not in NORMALS]
         if not remaining:
             break
         why = unphysical(cur, state, data)
@@ -345,7 +366,12 @@ def _step(state, cur, remaining, radial_first, data, ln_n, alpha, i, progress) -
             fit = scored[c.effect][1]
             if on_held is not None:
                 progress(f"step {i}: {c.effect} refitted with the structure")
-                fit = fit_state(state.plus(c.effect), data, start=cur.shared, gains_from=fit)
+                fit = refit_with_structure(state.plus(c.effect), data, cur.shared, fit)
+                # the structure refitted (its count chosen anew) may lose what the gain won on it held: the effect
+                # is added only if the refit lowers the gap (χ²/dof), what the steps report
+                if fit.gap >= cur.gap:
+                    progress(f"step {i}: {c.effect} refitted with the structure does not lower the gap; not added")
+                    continue
             elif normals_held is not None:
                 progress(f"step {i}: {c.effect} refitted with its normals")
                 fit = fit_state(state.plus(c.effect), data, start=cur.shared)

@@ -186,7 +186,7 @@ RADIAL = {
         "the lamp's angular falloff, cos^n ψ",
         ("n",),
         ((-10.0, 20.0),),
-        lambda t, d: np.clip(d.lamp_cos, 1e-6, None) ** t[0],
+        lambda t, d: d.lamp_cos.clip(1e-6) ** t[0],  # a method NumPy and JAX arrays share (_photo_held)
     ),
 }
 

@@ -3,7 +3,8 @@
 A :class:`PhotoState` names the radial gains found (``vignetting``,
 ``flash_falloff``: :mod:`._photo_model`) and the structural ones
 (``varying_specular``: a lobe per material cluster, ``normals``: a normal per
-problem). Without structural effects a state is fitted by
+problem, ``height_field``: those normals tied to one height field over the
+problems' grid, :mod:`wardjax.fit._pixel_height`). Without structural effects a state is fitted by
 :func:`~wardjax.effects._photo_model.fit_shared`; with them, its gains are
 fitted there and held, the data divided by them, and
 :func:`wardjax.fit_pixels` fits the lobes (``lobe="clusters"``) and normals.
@@ -24,12 +25,14 @@ import numpy as np
 
 from ._photo_model import RADIAL, PhotoData, SharedFit, chi2_held, fit_shared, gains
 
-__all__ = ["STRUCTURAL", "PhotoState", "StateFit", "fit_state", "held_chi2"]
+__all__ = ["NORMALS", "STRUCTURAL", "PhotoState", "StateFit", "fit_state", "held_chi2"]
 
 STRUCTURAL = {
     "varying_specular": "a lobe per material cluster (count chosen by BIC), each problem labelled with one",
     "normals": "a normal per problem where it earns its BIC cost (bumps, tilt)",
+    "height_field": "normals tied to one height field: the nearest integrable normal map (Frankot & Chellappa 1988)",
 }
+NORMALS = ("normals", "height_field")  # one or the other: a normal per problem, free or tied to its neighbours
 
 
 @dataclasses.dataclass(frozen=True)
@@ -51,7 +54,11 @@ class PhotoState:
 
     @property
     def normals(self) -> bool:
-        return "normals" in self.structural
+        return any(n in self.structural for n in NORMALS)
+
+    @property
+    def height_field(self) -> bool:
+        return "height_field" in self.structural
 
     @property
     def n_radial(self) -> int:
@@ -71,10 +78,13 @@ class StateFit(NamedTuple):
         return self.chi2 / max(self.dof, 1)
 
 
-def _pixel_fit(data: PhotoData, g: np.ndarray, keep: np.ndarray, lobe: str, normals: bool, held=None):
-    """:func:`wardjax.fit_pixels` on the views ``keep``; ``held``: normals ``(P, 3)`` to fit at, not refit."""
+def _pixel_fit(data: PhotoData, g: np.ndarray, keep: np.ndarray, state: PhotoState, held=None):
+    """:func:`wardjax.fit_pixels` on the views ``keep``; ``held``: normals ``(P, 3)`` to fit at, not refit; the
+    problems' grid ``(rows, cols)`` the height field where ``state`` has one."""
     from ..fit import fit_pixels
 
+    lobe, normals = state.lobe, state.normals
+    fit_normals = normals and held is None
     w = data.w * (g * g * keep)[..., None]
     return fit_pixels(
         data.f / g[..., None],
@@ -83,8 +93,9 @@ def _pixel_fit(data: PhotoData, g: np.ndarray, keep: np.ndarray, lobe: str, norm
         weights=w,
         mask=np.any(w > 0, -1),
         lobe=lobe,
-        normals=normals and held is None,
+        normals=fit_normals,
         fixed_normals=held if normals else None,
+        height_field=data.grid[:2] if fit_normals and state.height_field else None,
         normalization=data.normalization,
     )
 
@@ -108,7 +119,7 @@ def fit_state(
     if not (state.structural or pixels):
         return StateFit(shared.chi2, shared.dof, shared, None)
     held = getattr(getattr(normals_from, "pixel", None), "normals", None)
-    res = _pixel_fit(data, gains(data, shared.effects), keep, state.lobe, state.normals, held)
+    res = _pixel_fit(data, gains(data, shared.effects), keep, state, held)
     chi2 = float(res.chi2)
     ev = getattr(getattr(normals_from, "pixel", None), "evidence", {})
     n_held = 2 * int(ev.get("normals", {}).get("n_pixels", 0)) if held is not None else 0  # the held normals

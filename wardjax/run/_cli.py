@@ -297,7 +297,7 @@ def fit_cmd(
                 chi, rms = q["weighted_chi2_per_dof"], q["residual_rms_sr-1"]
                 t.add_row(
                     it.name,
-                    "skipped (done)" if it.skipped else "ok",
+                    "skipped (done)" if it.skipped else "not physical" if it.params["fit"].get("verdict") else "ok",
                     pm("rho_s"),
                     pm("alpha_x"),
                     pm("alpha_y"),
@@ -313,6 +313,8 @@ def fit_cmd(
                 console.print(f"colour: {it.name}: {note}", highlight=False, soft_wrap=True)
             if note := held_out_note(it.params):
                 console.print(f"{it.name}: {note}", highlight=False, soft_wrap=True)
+            if verdict := (it.params or {}).get("fit", {}).get("verdict"):  # a photo fit no material has
+                console.print(verdict, highlight=False, soft_wrap=True)
     if any(it.status == "error" for it in items):
         sys.exit(2)
 

@@ -24,6 +24,7 @@ import numpy as np
 from .._files import srgb8, write_bytes_atomic, write_image, write_json_atomic
 from ..capture import CAPTURE_FILE, CaptureError, PhotoCapture
 from ..ward import WardParams
+from ._photo_verdict import Verdict, physical_verdict
 
 __all__ = ["HeldOut", "PhotoFit", "fit_photo_capture", "write_photo_outputs"]
 
@@ -92,7 +93,7 @@ class PhotoFit:
 
 
 def fit_photo_capture(
-    cap: PhotoCapture, *, hold_out: int | None = None, lobe: str | None = None, normals: bool = False
+    cap: PhotoCapture, *, hold_out: int | None = None, lobe: str | None = None, normals: str | bool | None = None
 ) -> PhotoFit:
     """Fit a :class:`~wardjax.capture.PhotoCapture` (all photos, or all but ``hold_out``).
 
@@ -105,7 +106,9 @@ def fit_photo_capture(
     lobe
         ``"shared"``, ``"clusters"`` or ``"pixel"``; default ``[fit] lobe`` of ``capture.toml``.
     normals
-        Fit a normal per pixel too.
+        ``"none"``, ``"pixel"`` (a normal per problem, ``True`` too) or ``"height_field"`` (the normals tied to
+        one height field over the problems' grid: :func:`~wardjax.fit_pixels`' ``height_field``); default
+        ``[fit] normals`` of ``capture.toml``. Either needs two photos or more.
 
     Raises
     ------
@@ -121,6 +124,14 @@ def fit_photo_capture(
         if not 0 <= hold_out < k:
             raise CaptureError(CAPTURE_FILE, "photos", f"--hold-out {hold_out}: the capture has photos 0 to {k - 1}")
     keep = [i for i in range(k) if i != hold_out]
+    mode = cap.config.fit.normals if normals is None else "pixel" if normals is True else normals or "none"
+    if mode != "none" and len(keep) < 2:
+        raise CaptureError(
+            CAPTURE_FILE,
+            "fit.normals",
+            f"{mode!r} needs two photos or more fitted; {cap.name} has {len(keep)}: a normal per pixel and ρd "
+            "varying across pixels make the same picture in one",
+        )
     b = cap.config.fit.block
     if h < b or w < b:
         raise CaptureError(CAPTURE_FILE, "fit.block", f"{b} is larger than the {w}×{h} pixels fitted")
@@ -141,7 +152,8 @@ def fit_photo_capture(
         mask=m,
         lobe=lobe or cap.config.fit.lobe,
         model=cap.config.fit.model,
-        normals=normals,
+        normals=mode != "none",
+        height_field=(hh // b, ww // b) if mode == "height_field" else None,
         normalization=cap.config.fit.normalization,
     )
     labels = np.repeat(np.repeat(np.asarray(res.labels).reshape(hh // b, ww // b), b, 0), b, 1)
@@ -244,11 +256,25 @@ def write_photo_outputs(fit: PhotoFit, out_dir, *, created: str) -> dict:
     rho_mean = np.nanmean(fit.rho_d.reshape(-1, fit.rho_d.shape[-1]), axis=0)
     n_ok = np.sum(np.isfinite(fit.rho_d[..., 0]))
     rho_err = np.sqrt(np.nansum(fit.rho_d_stderr.reshape(-1, 3) ** 2, axis=0)) / max(n_ok, 1)
-    params = WardParams(rho_d=rho_mean, rho_s=rho_s[0], alpha_x=ax[0], alpha_y=ay[0])
-    stderr = WardParams(rho_d=rho_err, rho_s=srho_s[0], alpha_x=sax[0], alpha_y=say[0])
-    write_image(out / "rho_d.tif", fit.rho_d.astype(np.float32))
-    write_image(out / "rho_d.png", srgb8(fit.rho_d))
-    write_image(out / "rho_d_sigma.tif", fit.rho_d_stderr.astype(np.float32))
+    # the estimate as measured: a fit may leave the physical range (the verdict below says so)
+    params = WardParams.from_estimate(rho_d=rho_mean, rho_s=rho_s[0], alpha_x=ax[0], alpha_y=ay[0])
+    stderr = WardParams.from_estimate(rho_d=rho_err, rho_s=srho_s[0], alpha_x=sax[0], alpha_y=say[0])
+    chi2, dof = float(getattr(res, "chi2", np.nan)), int(getattr(res, "dof", 0))
+    lobes = {"rho_s": rho_s, "alpha_x": ax, "alpha_y": ay, "rho_s_err": srho_s, "alpha_x_err": sax, "alpha_y_err": say}
+    verdict = physical_verdict(
+        rho_mean,
+        rho_err,
+        lobes,
+        chi2_per_dof=chi2 / dof if dof > 0 else None,
+        rho_d_map=fit.rho_d,
+        rho_d_map_err=fit.rho_d_stderr,
+    )
+    files = {}
+    if verdict.physical:  # the texture a renderer loads: not written with values no material has
+        write_image(out / "rho_d.tif", fit.rho_d.astype(np.float32))
+        write_image(out / "rho_d.png", srgb8(fit.rho_d))
+        write_image(out / "rho_d_sigma.tif", fit.rho_d_stderr.astype(np.float32))
+        files = {"rho_d": "rho_d.tif", "rho_d_png": "rho_d.png", "rho_d_sigma": "rho_d_sigma.tif"}
     maps = {"rho_d": fit.rho_d, "rho_d_stderr": fit.rho_d_stderr, "labels": fit.labels, "mask": cap.mask}
     if fit.normals is not None:
         maps["normals"] = fit.normals
@@ -257,28 +283,22 @@ def write_photo_outputs(fit: PhotoFit, out_dir, *, created: str) -> dict:
     buf = io.BytesIO()
     np.savez_compressed(buf, **maps)  # pyright: ignore[reportArgumentType]
     write_bytes_atomic(out / "maps.npz", buf.getvalue())
-    files = {"rho_d": "rho_d.tif", "rho_d_png": "rho_d.png", "rho_d_sigma": "rho_d_sigma.tif", "maps": "maps.npz"}
+    files["maps"] = "maps.npz"
     if fit.held_out is not None:
         from ._heldout_figure import heldout_png
 
         write_bytes_atomic(out / "heldout.png", heldout_png(fit.held_out))
         files["heldout"] = "heldout.png"
-    chi2, dof = float(getattr(res, "chi2", np.nan)), int(getattr(res, "dof", 0))
     fit_doc = {
-        "status": "converged",
+        "status": "converged" if verdict.physical else "not_physical",
+        "verdict": None if verdict.physical else verdict.line(cap.name, cap.photos),
+        "held_to_range": list(verdict.notes),
         "reduced_chi2": chi2 / dof if dof > 0 else None,
         "weighted": True,  # 1/σ² from the noise model: a χ²/dof (wardjax.export.fit_quality)
         "chi2": chi2,
         "dof": dof,
         "lobe": getattr(res, "lobe", cap.config.fit.lobe),
-        "lobes": {
-            "rho_s": rho_s,
-            "alpha_x": ax,
-            "alpha_y": ay,
-            "rho_s_err": srho_s,
-            "alpha_x_err": sax,
-            "alpha_y_err": say,
-        },
+        "lobes": lobes,
         "photos": list(cap.photos),
         "photos_fitted": list(fit.photos_fitted),
         "held_out": None if fit.held_out is None else fit.held_out.summary(),
@@ -289,12 +309,15 @@ def write_photo_outputs(fit: PhotoFit, out_dir, *, created: str) -> dict:
         "diagnostics": {"pixels": {"valid": int(np.sum(cap.mask.any(axis=-1))), "total": int(cap.mask[..., 0].size)}},
     }
     files["report"] = "report.md"
-    write_bytes_atomic(out / "report.md", report_text(fit, params, stderr, fit_doc).encode())
-    radiance = {
+    write_bytes_atomic(out / "report.md", report_text(fit, params, stderr, fit_doc, verdict).encode())
+    nan = WardParams.from_estimate(rho_d=np.full(3, np.nan), rho_s=np.nan, alpha_x=np.nan, alpha_y=np.nan)
+    radiance = {  # the material: the estimate held to the physical ranges, or nothing (JSON null) when it is none
         "normalization": cap.config.fit.normalization,
-        "params": params,
-        "stderr": stderr,
-        "status": "not exported: photograph fits are not refitted in Radiance's normalisation yet",
+        "params": verdict.material if verdict.material is not None else nan,
+        "stderr": stderr if verdict.physical else nan,
+        "status": "not exported: photograph fits are not refitted in Radiance's normalisation yet"
+        if verdict.physical
+        else "not exported: not a physical material (fit.verdict)",
         "tangent": [1.0, 0.0],
     }
     doc = params_document(
@@ -316,16 +339,12 @@ def write_photo_outputs(fit: PhotoFit, out_dir, *, created: str) -> dict:
     return jsonable(doc)
 
 
-# Above this fraction of negative ρd values the report says the fit is no physical material (a few are noise).
-_MAX_NEGATIVE_RHO_D = 0.1
-
-
 def _pm(value: float, err: float) -> str:
     """``value ± err``; an error that rounds to zero at 4 decimals in scientific notation."""
     return f"{value:.4f} ± {err:.4f}" if abs(err) >= 5e-5 or not np.isfinite(err) else f"{value:.4f} ± {err:.1e}"
 
 
-def report_text(fit: PhotoFit, params: WardParams, stderr: WardParams, doc: dict) -> str:
+def report_text(fit: PhotoFit, params: WardParams, stderr: WardParams, doc: dict, verdict: Verdict) -> str:
     """``report.md``: the capture, what the loader assumed, the lobes with σ, the held-out photo's errors."""
     cap = fit.capture
     lines = [
@@ -356,15 +375,9 @@ def report_text(fit: PhotoFit, params: WardParams, stderr: WardParams, doc: dict
                 "χ²/dof well above 1: the model leaves structure the pixel noise does not explain (texture within a "
                 "block, the lamp's angular falloff, the camera's processing); the σ above hold only if the model did."
             )
-    bad_lobe = [i for i, (s, a) in enumerate(zip(lob["rho_s"], lob["alpha_x"])) if s > 1 or a > 1]
-    neg = float(np.mean(fit.rho_d[np.isfinite(fit.rho_d)] < 0)) if np.isfinite(fit.rho_d).any() else 0.0
-    if bad_lobe or neg > _MAX_NEGATIVE_RHO_D:
-        why = [f"lobe {i} has ρs > 1 or α > 1" for i in bad_lobe]
-        why += [f"ρd < 0 in {100 * neg:.0f} % of the values"] if neg > _MAX_NEGATIVE_RHO_D else []
-        lines.append(
-            f"Not a physical material ({'; '.join(why)}): the lobe stands in for an effect the model lacks, "
-            "it does not describe a specular peak."
-        )
+    if not verdict.physical:
+        lines += ["", f"**{doc['verdict']}.**"]
+    lines += [f"- {n}" for n in verdict.notes]
     ho = fit.held_out
     if ho is not None:
         lines += [
