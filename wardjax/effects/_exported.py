@@ -26,13 +26,13 @@ from __future__ import annotations
 
 import functools
 import hashlib
-import os
-import tempfile
 from collections.abc import Callable
 from pathlib import Path
 
 import jax
 from jax import export
+
+from .._files import write_bytes_atomic
 
 __all__ = ["call"]
 
@@ -81,10 +81,7 @@ def _write(path: Path, blob: bytes | bytearray) -> None:
     """Write atomically (a concurrent process reads the whole file or none); a failure only skips the write."""
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=path.name, suffix=".tmp")
-        with os.fdopen(fd, "wb") as f:
-            f.write(blob)
-        os.replace(tmp, path)
+        write_bytes_atomic(path, blob)
     except OSError:
         pass
 
