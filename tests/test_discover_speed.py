@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import functools
-
 import numpy as np
 import pytest
 from threadpoolctl import threadpool_info, threadpool_limits
@@ -131,42 +129,3 @@ def test_exported_program_is_read_back_without_tracing_and_gives_the_same_number
         monkeypatch.setattr(_exported, "_folder", lambda: None)
         plain = _exported.call("t", functools.partial(jitted, k=4), (("k", 4),), (x, tree))
         np.testing.assert_allclose(np.asarray(plain[1]), np.asarray(jitted(x, tree, k=4)[1]), rtol=0, atol=0)
-
-
-def test_stalling_lm_ends_a_settled_fit_unconverged_and_leaves_a_moving_one_alone():
-    """A parameter that lowers χ² less and less as it runs off keeps Levenberg–Marquardt's parameter rule from ever
-    being met: the plain solver runs to its cap. With the stall rule the fit ends once an accepted step gains less
-    than the stall in χ², at the χ² of the capped fit (within the stall), flagged unconverged; from a start that gains
-    little from its first step on (a lobe far from the data) it runs on. Rosenbrock's valley ends, also flagged,
-    within the stall of its minimum; with no stall it is solved as by the plain solver."""
-    import jax
-    import jax.numpy as jnp
-    import optimistix as optx
-
-    from wardjax.effects._solve import _LINEAR_SOLVER, _StallingLM
-
-    def flat(z, _):  # the second parameter lowers χ² less and less as it runs off to large values
-        return jnp.array([z[0] - 1.0, 1e-3 * jnp.exp(-z[1])])
-
-    def valley(z, _):
-        return jnp.array([z[0] - 1.0, 10 * (z[1] - z[0] ** 2)])
-
-    @functools.partial(jax.jit, static_argnums=0)
-    def solve(fn, y0, stall):
-        lm = _StallingLM(1e-6, 1e-8, stall, _LINEAR_SOLVER, jnp.sum(fn(y0, None) ** 2))
-        sol = optx.least_squares(fn, lm, y0, max_steps=60, throw=False)
-        chi2 = jnp.sum(fn(sol.value, None) ** 2)
-        return chi2, sol.stats["num_steps"], sol.result == optx.RESULTS.successful, sol.value
-
-    with jax.enable_x64(True):
-        y0 = jnp.array([3.0, 0.0])
-        c_cap, n_cap, ok_cap, _ = solve(flat, y0, 0.0)
-        c_st, n_st, ok_st, _ = solve(flat, y0, 1e-3)
-        assert int(n_cap) == 60 and not bool(ok_cap)
-        assert int(n_st) < 60 and not bool(ok_st)
-        assert float(c_st) - float(c_cap) < 1e-3
-        _, n_far, _, _ = solve(flat, jnp.array([1.0, 0.0]), 1e-3)  # gains little from its start: not settled
-        assert int(n_far) == 60
-        (c0, n0, ok0, z0), (c1, n1, ok1, _) = (solve(valley, jnp.array([-1.2, 1.0]), s) for s in (0.0, 1e-3))
-        assert bool(ok0) and float(c0) < 1e-20 and np.allclose(np.asarray(z0), 1.0)  # no stall: plain LM's optimum
-        assert not bool(ok1) and int(n1) < int(n0) and float(c1) - float(c0) < 1e-3

@@ -101,15 +101,14 @@ class _Search:
         first) can take Levenberg–Marquardt more than ``lm_steps`` steps; a
         fit whose parameters are reported, or whose Δχ² decides, must have
         converged. The priors stay centred on the first start. A round that leaves χ² where it was ends
-        it (stalled; it stays unconverged) rather than repeat the same point, and so does one that gains less
-        than the solver's stall (``TOL[2]`` in χ²: :class:`~wardjax.effects._solve._StallingLM`).
+        it (stalled; it stays unconverged) rather than repeat the same point.
         """
         last = math.inf
         for _ in range(_REFINE_ROUNDS):
             u, chi2, _, ok, idx, km, anchor = r
             # a round that lowered nothing has stalled (a parameter pinned where its gradient vanishes): the next,
             # from the same point, would repeat it exactly
-            if ok or not np.isfinite(chi2) or chi2 >= last - TOL[2]:
+            if ok or not np.isfinite(chi2) or chi2 >= last:
                 break
             last = chi2
             job = (u, [int(j) for j in idx[km]], tuple(active), anchor)

@@ -11,9 +11,7 @@ from __future__ import annotations
 
 import functools
 import math
-from typing import Any
 
-import equinox as eqx
 import jax
 import jax.numpy as jnp
 import lineax as lx
@@ -24,50 +22,9 @@ from . import _exported
 from ._effect import Effect, Param
 
 _LINEAR_SOLVER = lx.QR()
-# Levenberg–Marquardt's stopping rule: relative and absolute tolerances on every parameter and every residual, and
-# the stall: an accepted step that lowers χ² by less than this ends the fit, flagged unconverged (see _StallingLM)
-TOL = (1e-6, 1e-8, 1e-3)
-_STALL_SHARE = 1e-3  # ... and by less than this share of what it has gained since its start
-
-
-class _StallingLM(optx.LevenbergMarquardt):
-    """Levenberg–Marquardt that also stops, *unconverged*, once an accepted step lowers χ² by less than ``stall``.
-
-    The stopping rule of :class:`optimistix.LevenbergMarquardt` asks every
-    parameter and every whitened residual to move by less than ``atol + rtol·|value|``.
-    A fit whose χ² has settled can still fail it for its whole step cap: a
-    parameter the data do not pin wanders along a flat direction (a Fresnel
-    κ running to large values, a second lobe's ratio while its weight is
-    zero, anisotropy's angle at η ≈ 0), moving the parameters but not χ².
-    Most candidates of a step did (10 of 15 on a textured 320 × 240 capture,
-    20 steps each, χ² equal across their starts to 10⁻²). Such a fit now ends
-    at the first accepted step that gains less than ``stall`` in χ², and less
-    than ``_STALL_SHARE`` of what it has gained since its start
-    (``chi2_start``), and is flagged unconverged, as one that hit the cap is: where it decides (the
-    baseline, a step's leader and its contenders, a winner's refits) it is
-    continued from there (``_Search.refine``), elsewhere its Δχ² is the lower
-    bound the report marks, as before.
-    """
-
-    stall: Any
-    chi2_start: Any
-
-    def __init__(self, rtol, atol, stall, linear_solver, chi2_start: Any = jnp.inf):
-        super().__init__(rtol=rtol, atol=atol, linear_solver=linear_solver)
-        self.stall, self.chi2_start = stall, chi2_start
-
-    def step(self, fn, y, args, options, state, tags):
-        y_new, new, aux = super().step(fn, y, args, options, state, tags)
-        accepted = (new.num_accepted_steps > state.num_accepted_steps) & ~state.first_step
-        chi2 = jnp.sum(new.f_info.residual**2)  # with the priors' terms, as the solver sees it
-        gain = jnp.sum(state.f_info.residual**2) - chi2
-        # settled: the step gains less than the stall, and less than 10⁻³ of what the fit has gained since its start
-        # (a start in a flat region, a lobe far from the data, gains little at first and must not stop there)
-        settled = (gain < self.stall) & (gain < _STALL_SHARE * (self.chi2_start - chi2))
-        stall = accepted & settled & ~new.terminate
-        result = optx.RESULTS.where(stall, optx.RESULTS.nonlinear_max_steps_reached, new.result)
-        new = eqx.tree_at(lambda s: (s.terminate, s.result), new, (new.terminate | stall, result))
-        return y_new, new, aux
+# Levenberg–Marquardt's stopping rule (relative, absolute) on every parameter and every residual: the default, and
+# the looser one the candidates of a step are ranked with (their deciders are then continued at the default)
+TOL = (1e-6, 1e-8)
 
 
 class _Layout:
@@ -145,9 +102,8 @@ def _solve_batch(u0, a0, idx, kmask, active, prior_w, tol, data, *, model, effec
         def resid(z, _):
             return jnp.concatenate([data_resid(z), pw * (z - z0)])
 
-        # the tolerances are data (``tol``: rtol, atol, stall), so that one compiled program serves any rule
-        chi2_start = jnp.sum(resid(u0[idx], None) ** 2)
-        solver = _StallingLM(tol[0], tol[1], tol[2], _LINEAR_SOLVER, chi2_start)
+        # the tolerances are data (``tol``: rtol, atol), so that one compiled program serves both rules
+        solver = optx.LevenbergMarquardt(rtol=tol[0], atol=tol[1], linear_solver=_LINEAR_SOLVER)
         sol = optx.least_squares(resid, solver, u0[idx], max_steps=max_steps, throw=False)
         z = sol.value
         r = data_resid(z)
