@@ -60,13 +60,20 @@ def _source_digest() -> str:
 
 def _folder() -> Path | None:
     """``exported/`` in the compile cache folder, or ``None`` where no cache folder is set."""
-    d = jax.config.jax_compilation_cache_dir
+    d = getattr(jax.config, "jax_compilation_cache_dir", None)
     return Path(d) / "exported" if d else None
 
 
 def _digest(name: str, static: tuple, treedef, leaves) -> str:
     avals = [(tuple(x.shape), str(x.dtype), bool(getattr(x, "weak_type", False))) for x in leaves]
-    parts = (name, repr(static), str(treedef), repr(avals), jax.config.jax_enable_x64, jax.default_backend())
+    parts = (
+        name,
+        repr(static),
+        str(treedef),
+        repr(avals),
+        getattr(jax.config, "jax_enable_x64", False),
+        jax.default_backend(),
+    )
     return hashlib.sha256(repr((parts, jax.__version__, _source_digest())).encode()).hexdigest()[:40]
 
 
@@ -81,7 +88,7 @@ def _write(path: Path, blob: bytes | bytearray) -> None:
 
 def _load(path: Path) -> Callable | None:
     try:
-        return jax.jit(export.deserialize(path.read_bytes()).call)
+        return jax.jit(export.deserialize(bytearray(path.read_bytes())).call)
     except (OSError, ValueError, TypeError):  # unreadable or written by an interrupted run: trace it again
         return None
 
