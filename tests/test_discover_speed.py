@@ -84,3 +84,48 @@ def test_gls_rho_derivative_by_hand_is_autodiff_through_the_whitening(rng):
             X[c * n : (c + 1) * n, c] = inv_sp[s, :, c]
         A, b = W[s] @ X, W[s] @ resid[s].T.reshape(-1)
         np.testing.assert_allclose(np.asarray(p)[s, 0] / np.pi, np.linalg.solve(A.T @ A, A.T @ b), rtol=1e-10)
+
+
+def _program(x, tree, *, k):
+    """A traced program with a static setting, a pytree argument and LAPACK's QR (as the LM program solves)."""
+    import jax.numpy as jnp
+    import lineax as lx
+
+    a = tree["a"] + k * jnp.eye(x.shape[0])
+    sol = lx.linear_solve(lx.MatrixLinearOperator(a), x, lx.QR(), throw=False)
+    return sol.value, jnp.sum(sol.value * tree["b"])
+
+
+def test_exported_program_is_read_back_without_tracing_and_gives_the_same_numbers(rng, tmp_path, monkeypatch):
+    """A program traced once is written beside the compile cache; a fresh process (the in-memory table emptied)
+    reads it back without tracing the Python, and the numbers are the jitted function's, bit for bit. Another
+    static setting is another program; with no cache folder the function is called as it is."""
+    import functools
+
+    import jax
+
+    from wardjax.effects import _exported
+
+    jitted = jax.jit(_program, static_argnames="k")
+    x, tree = rng.normal(size=6), {"a": rng.normal(size=(6, 6)), "b": rng.normal(size=6)}
+    monkeypatch.setattr(_exported, "_LOADED", {})
+    monkeypatch.setattr(_exported, "_folder", lambda: tmp_path)
+    with jax.enable_x64(True):
+        want = [np.asarray(v) for v in jitted(x, tree, k=3)]
+        got = _exported.call("t", functools.partial(jitted, k=3), (("k", 3),), (x, tree))
+        assert len(list(tmp_path.glob("t-*.bin"))) == 1
+        monkeypatch.setattr(_exported, "_LOADED", {})  # a new process: only the file is left
+
+        def no_trace(*_a, **_k):
+            raise AssertionError("traced again")
+
+        monkeypatch.setattr(_exported.export, "export", no_trace)
+        again = _exported.call("t", functools.partial(jitted, k=3), (("k", 3),), (x, tree))
+        for a, b, c in zip(want, got, again):
+            np.testing.assert_array_equal(np.asarray(b), a)
+            np.testing.assert_array_equal(np.asarray(c), a)
+        with pytest.raises(AssertionError, match="traced again"):  # another setting: another program
+            _exported.call("t", functools.partial(jitted, k=4), (("k", 4),), (x, tree))
+        monkeypatch.setattr(_exported, "_folder", lambda: None)
+        plain = _exported.call("t", functools.partial(jitted, k=4), (("k", 4),), (x, tree))
+        np.testing.assert_allclose(np.asarray(plain[1]), np.asarray(jitted(x, tree, k=4)[1]), rtol=0, atol=0)

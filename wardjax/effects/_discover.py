@@ -229,7 +229,9 @@ def _baseline(model, data, testable, lm_steps: int, chunk: int, texture: bool):
     With the texture to be carried, the baseline that measures it is fitted
     under an identity whitening: the same numbers as white noise and the same
     compiled program as every fit after it (one program to trace and compile
-    per run, not two: ~3 s of tracing even with the compile cache warm).
+    per run, not two: ~3 s of tracing even with the compile cache warm). The
+    baseline under the texture's covariance is then refitted from that fit
+    (its multi-start chose the basin), not from every start again.
     """
     carry = texture and model.kind == "scanline" and getattr(data, "kind", None) in ("ratio", "brdf")
     plain = _Search(model, identity_whitened(data) if carry else data, testable, lm_steps, chunk)
@@ -256,7 +258,8 @@ def _baseline(model, data, testable, lm_steps: int, chunk: int, texture: bool):
     if tex is None:  # no texture: the plain data (the identity costs a dense product per evaluation)
         return _with_holdout(make(data)), cur, None
     search.remeasure = TextureRemeasure(plain, textured)
-    return search, search.residual_view(_fit_baseline(search)), tex
+    # from the white-noise baseline, where the multi-start found its basin: one start, not all of them again
+    return search, search.residual_view(TextureRemeasure.refit(search, cur.state)), tex
 
 
 def _with_holdout(search: _Search, levels: dict | None = None) -> _Search:

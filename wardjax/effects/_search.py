@@ -8,6 +8,7 @@ structure tests read off it.
 
 from __future__ import annotations
 
+import functools
 import math
 from typing import NamedTuple
 
@@ -15,12 +16,13 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from . import _exported
 from ._effect import Effect, Param
 from ._holdout import Holdout
 from ._recheck import VariogramRecheck
 from ._remeasure import TextureRemeasure
 from ._report import FitState
-from ._solve import _cov_full, _fit_batch, _Layout, _residual_view
+from ._solve import TOL, _cov_full, _fit_batch, _Layout, _residual_view, static_key
 from ._texture_term import CrossTexture
 
 _SOLO_MIN_OBS = 20_000  # from this many residuals on, each fit is solved alone (_fit_batch)
@@ -75,8 +77,9 @@ class _Search:
         out.solo = self.solo
         return out
 
-    def fit(self, jobs):
-        """Solve ``jobs`` (see :func:`_fit_batch`) at the run's padded width, batch width and step cap."""
+    def fit(self, jobs, tol=TOL):
+        """Solve ``jobs`` (see :func:`_fit_batch`) at the run's padded width, batch width and step cap (``tol``:
+        the stopping rule's relative and absolute tolerances)."""
         return _fit_batch(
             jobs,
             self.layout,
@@ -88,6 +91,7 @@ class _Search:
             self.lm_steps,
             self.chunk,
             self.solo,
+            tol,
         )
 
     def refine(self, r, active=()):
@@ -138,15 +142,11 @@ class _Search:
     def residual_view(self, st: FitState) -> _View:
         """Whitened residuals, prediction and covariates of ``st``: what the structure tests and plots read."""
         act = np.array([i in st.active for i in range(len(self.testable))], bool)
+        static = dict(model=self.model, effects=self.testable, layout_key=self.layout.key)
         with jax.enable_x64(True):  # the parameters too: outside, jnp.asarray would round them to float32
-            r, pred, rho, lv = _residual_view(
-                jnp.asarray(st.u),
-                jnp.asarray(act),
-                self.data_dev,
-                model=self.model,
-                effects=self.testable,
-                layout_key=self.layout.key,
-            )
+            fn = functools.partial(_residual_view, **static)
+            args = (jnp.asarray(st.u), jnp.asarray(act), self.data_dev)
+            r, pred, rho, lv = _exported.call("residual_view", fn, static_key(static), args)
         r, pred = np.asarray(r), np.asarray(pred)
         rho = None if rho is None else np.asarray(rho)
         return _View(st, r, pred, self.model.covariates(self.data, pred), rho, float(lv))

@@ -18,9 +18,13 @@ import lineax as lx
 import numpy as np
 import optimistix as optx
 
+from . import _exported
 from ._effect import Effect, Param
 
 _LINEAR_SOLVER = lx.QR()
+# Levenberg–Marquardt's stopping rule (relative, absolute) on every parameter and every residual: the default, and
+# the looser one the candidates of a step are ranked with (their deciders are then continued at the default)
+TOL = (1e-6, 1e-8)
 
 
 class _Layout:
@@ -81,7 +85,7 @@ def _unpack(key: tuple, u, names: tuple[str, ...]):
 
 
 @functools.partial(jax.jit, static_argnames=("model", "effects", "layout_key", "max_steps"))
-def _solve_batch(u0, a0, idx, kmask, active, prior_w, data, *, model, effects, layout_key, max_steps):
+def _solve_batch(u0, a0, idx, kmask, active, prior_w, tol, data, *, model, effects, layout_key, max_steps):
     names = tuple(e.name for e in effects)
     ctx = model.context(data) if hasattr(model, "context") else None
 
@@ -98,7 +102,8 @@ def _solve_batch(u0, a0, idx, kmask, active, prior_w, data, *, model, effects, l
         def resid(z, _):
             return jnp.concatenate([data_resid(z), pw * (z - z0)])
 
-        solver = optx.LevenbergMarquardt(rtol=1e-6, atol=1e-8, linear_solver=_LINEAR_SOLVER)
+        # the tolerances are data (``tol``: rtol, atol), so that one compiled program serves both rules
+        solver = optx.LevenbergMarquardt(rtol=tol[0], atol=tol[1], linear_solver=_LINEAR_SOLVER)
         sol = optx.least_squares(resid, solver, u0[idx], max_steps=max_steps, throw=False)
         z = sol.value
         r = data_resid(z)
@@ -149,7 +154,7 @@ def _job_rows(jobs, layout, n_e, width):
     return rows
 
 
-def _solve_rows(rows, layout, model, effects, data, max_steps):
+def _solve_rows(rows, layout, model, effects, data, max_steps, tol=TOL):
     """One ``_solve_batch`` call on stacked rows, dispatched: device arrays back, not yet waited for.
 
     JAX dispatches asynchronously, so a caller that dispatches several calls
@@ -157,24 +162,26 @@ def _solve_rows(rows, layout, model, effects, data, max_steps):
     on more than one core).
     """
     U0, A0, IDX, KM, A = (np.stack(col) for col in zip(*rows))
+    static = dict(model=model, effects=effects, layout_key=layout.key, max_steps=max_steps)
     with jax.enable_x64(True):
-        u, chi2, jtj, ok, _ = _solve_batch(
-            jnp.asarray(U0),
-            jnp.asarray(A0),
-            jnp.asarray(IDX),
-            jnp.asarray(KM),
-            jnp.asarray(A),
-            jnp.asarray(layout.prior_w),
-            data,
-            model=model,
-            effects=effects,
-            layout_key=layout.key,
-            max_steps=max_steps,
-        )
+        args = tuple(jnp.asarray(x) for x in (U0, A0, IDX, KM, A, layout.prior_w, np.asarray(tol, float))) + (data,)
+        fn = functools.partial(_solve_batch, **static)
+        u, chi2, jtj, ok, _ = _exported.call("lm", fn, static_key(static), args)
     return u, chi2, jtj, ok
 
 
-def _fit_batch(jobs, layout, model, effects, data, k_pad, b_pad, max_steps, chunk, solo=False):
+def static_key(static: dict) -> tuple:
+    """What names a traced program's static arguments on disk (:mod:`wardjax.effects._exported`): the model, each
+    effect's class, name and parameters (the effects hash by class and name), the layout, the step cap."""
+    out = []
+    for k, v in sorted(static.items()):
+        if k == "effects":
+            v = tuple((type(e).__module__, type(e).__qualname__, e.name, e.params) for e in v)
+        out.append((k, v))
+    return tuple(out)
+
+
+def _fit_batch(jobs, layout, model, effects, data, k_pad, b_pad, max_steps, chunk, solo=False, tol=TOL):
     """Solve a list of jobs ``(u0, free indices, active effect indices)``; one result per job, in order.
 
     Batched (``solo=False``): chunks of ``min(b_pad, chunk)`` jobs, each padded
@@ -203,7 +210,7 @@ def _fit_batch(jobs, layout, model, effects, data, k_pad, b_pad, max_steps, chun
     for c0 in range(0, len(rows), chunk):  # every call dispatched before any is read: they may run side by side
         part = rows[c0 : c0 + chunk]
         pad = part + [part[0]] * (width - len(part)) if len(part) < width else part
-        calls.append((part, _solve_rows(pad, layout, model, effects, data, max_steps)))
+        calls.append((part, _solve_rows(pad, layout, model, effects, data, max_steps, tol)))
     out = []
     for part, dev in calls:
         u, chi2, jtj, ok = (np.asarray(x) for x in dev)

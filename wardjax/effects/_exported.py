@@ -1,0 +1,126 @@
+"""Discovery's traced programs kept on disk beside XLA's compile cache, so that a later process skips tracing them.
+
+Why
+    JAX's persistent compile cache (:func:`wardjax.run._cache.enable_compile_cache`) keeps the *compiled* programs,
+    but finding one needs its key, and the key is computed from the lowered module: every process still traces
+    and lowers each program first. The Levenberg–Marquardt program of a discovery run (optimistix's solver around
+    the scanline model, every effect behind a switch) takes seconds to trace, in every ``wardjax diagnose``.
+
+How
+    :func:`call` runs a jitted function through :func:`jax.export`: the first process to need a program traces it
+    once, serialises the exported StableHLO (:meth:`jax.export.Exported.serialize`) into ``exported/`` under the
+    compile cache folder, and calls it; a later process reads it back and calls it without tracing the Python.
+    The module is the one the jitted function lowers to, so the numbers are the same (the tests compare them
+    bit for bit), and XLA's cache serves its compiled form as before.
+
+    A file is named by a digest of everything the trace depends on: the program's name and static arguments,
+    the argument tree and each leaf's shape and dtype, the 64-bit mode, the backend, the JAX version and the
+    wardjax source itself (every ``.py`` file of the package), so that a changed library never reads a stale
+    program. Without a compile cache folder (a library call, the tests) nothing is written and the function is
+    called as it is, as is a program that cannot be exported (one with host callbacks). Custom calls whose
+    compatibility across JAX versions is not guaranteed (LAPACK's QR) are allowed: a file is only read by the JAX
+    version that wrote it.
+"""
+
+from __future__ import annotations
+
+import functools
+import hashlib
+from collections.abc import Callable
+from pathlib import Path
+
+import jax
+from jax import export
+
+from .._files import write_bytes_atomic
+
+__all__ = ["call"]
+
+# the custom calls the LM program makes (LAPACK's QR in lineax): stable within one JAX version, which the key holds
+_CUSTOM_CALLS = (
+    "lapack_dgeqrf_ffi",
+    "lapack_dorgqr_ffi",
+    "lapack_dormqr_ffi",
+    "lapack_sgeqrf_ffi",
+    "lapack_sormqr_ffi",
+)
+_LOADED: dict[str, Callable] = {}  # digest → the jitted call of its exported program, for this process
+
+
+@functools.cache
+def _source_digest() -> str:
+    """A digest of wardjax's source: any change to the package names a new program."""
+    root = Path(__file__).resolve().parents[1]
+    h = hashlib.sha256()
+    for p in sorted(root.rglob("*.py")):
+        h.update(str(p.relative_to(root)).encode())
+        h.update(p.read_bytes())
+    return h.hexdigest()
+
+
+def _folder() -> Path | None:
+    """``exported/`` in the compile cache folder, or ``None`` where no cache folder is set."""
+    d = getattr(jax.config, "jax_compilation_cache_dir", None)
+    return Path(d) / "exported" if d else None
+
+
+def _digest(name: str, static: tuple, treedef, leaves) -> str:
+    avals = [(tuple(x.shape), str(x.dtype), bool(getattr(x, "weak_type", False))) for x in leaves]
+    parts = (
+        name,
+        repr(static),
+        str(treedef),
+        repr(avals),
+        getattr(jax.config, "jax_enable_x64", False),
+        jax.default_backend(),
+    )
+    return hashlib.sha256(repr((parts, jax.__version__, _source_digest())).encode()).hexdigest()[:40]
+
+
+def _write(path: Path, blob: bytes | bytearray) -> None:
+    """Write atomically (a concurrent process reads the whole file or none); a failure only skips the write."""
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        write_bytes_atomic(path, blob)
+    except OSError:
+        pass
+
+
+def _load(path: Path) -> Callable | None:
+    try:
+        return jax.jit(export.deserialize(bytearray(path.read_bytes())).call)
+    except (OSError, ValueError, TypeError):  # unreadable or written by an interrupted run: trace it again
+        return None
+
+
+def call(name: str, fn: Callable, static: tuple, args: tuple):
+    """``fn(*args)`` (``fn`` closes over ``static``, which names it in the key), from the program on disk if there.
+
+    ``args`` is any pytree of arrays; ``static`` the hashable settings ``fn`` was made with (their ``repr`` enters
+    the file's name, so it must say everything that changes the trace).
+    """
+    folder = _folder()
+    if folder is None:
+        return fn(*args)
+    leaves, treedef = jax.tree_util.tree_flatten(args)
+    key = _digest(name, static, treedef, leaves)
+    run = _LOADED.get(key)
+    if run is None:
+        path = folder / f"{name}-{key}.bin"
+        run = _load(path) if path.exists() else None
+        if run is None:
+
+            def flat(*xs):
+                return fn(*jax.tree_util.tree_unflatten(treedef, xs))
+
+            checks = [export.DisabledSafetyCheck.custom_call(t) for t in _CUSTOM_CALLS]
+            try:
+                exp = export.export(jax.jit(flat), disabled_checks=checks)(*leaves)
+                blob = exp.serialize()
+            except (NotImplementedError, ValueError):  # host callbacks, another custom call: run it as it is
+                _LOADED[key] = flat
+                return fn(*args)
+            _write(path, blob)
+            run = jax.jit(exp.call)
+        _LOADED[key] = run
+    return run(*leaves)
