@@ -14,9 +14,10 @@ How
     bit for bit), and XLA's cache serves its compiled form as before.
 
     A file is named by a digest of everything the trace depends on: the program's name and static arguments,
-    the argument tree and each leaf's shape and dtype, the 64-bit mode, the backend, the JAX version and the
-    wardjax source itself (every ``.py`` file of the package), so that a changed library never reads a stale
-    program. Without a compile cache folder (a library call, the tests) nothing is written and the function is
+    the argument tree and each leaf's shape and dtype, the 64-bit mode, the backend, the versions of JAX and of
+    the solver libraries traced into it (equinox, lineax, optimistix) and the wardjax source itself (every
+    ``.py`` file of the package), so that a changed library never reads a stale program. Without a compile
+    cache folder (a library call, the tests) nothing is written and the function is
     called as it is, as is a program that cannot be exported (one with host callbacks). Custom calls whose
     compatibility across JAX versions is not guaranteed (LAPACK's QR) are allowed: a file is only read by the JAX
     version that wrote it.
@@ -26,6 +27,7 @@ from __future__ import annotations
 
 import functools
 import hashlib
+import importlib.metadata
 from collections.abc import Callable
 from pathlib import Path
 
@@ -44,7 +46,15 @@ _CUSTOM_CALLS = (
     "lapack_sgeqrf_ffi",
     "lapack_sormqr_ffi",
 )
+# the libraries whose Python code is traced into the programs (their versions enter each file's name)
+_TRACED_WITH = ("jax", "jaxlib", "equinox", "lineax", "optimistix")
 _LOADED: dict[str, Callable] = {}  # digest → the jitted call of its exported program, for this process
+
+
+@functools.cache
+def _versions() -> tuple[str, ...]:
+    """The versions of the libraries a traced program is made of: an upgraded solver names a new program."""
+    return tuple(f"{m}=={importlib.metadata.version(m)}" for m in _TRACED_WITH)
 
 
 @functools.cache
@@ -74,7 +84,7 @@ def _digest(name: str, static: tuple, treedef, leaves) -> str:
         getattr(jax.config, "jax_enable_x64", False),
         jax.default_backend(),
     )
-    return hashlib.sha256(repr((parts, jax.__version__, _source_digest())).encode()).hexdigest()[:40]
+    return hashlib.sha256(repr((parts, _versions(), _source_digest())).encode()).hexdigest()[:40]
 
 
 def _write(path: Path, blob: bytes | bytearray) -> None:
