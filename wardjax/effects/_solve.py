@@ -22,8 +22,8 @@ from . import _exported
 from ._effect import Effect, Param
 
 _LINEAR_SOLVER = lx.QR()
-# Levenberg–Marquardt's stopping rule (relative, absolute) on every parameter and every residual: the default, and
-# the looser one the candidates of a step are ranked with (their deciders are then continued at the default)
+# Levenberg–Marquardt's stopping rule (relative, absolute) on every parameter and every residual; passed to the
+# compiled program as data, so another rule would not trace a new program
 TOL = (1e-6, 1e-8)
 
 
