@@ -2,7 +2,9 @@
 
 Scanline fits per second at 10³–10⁶ scanlines (float64 and float32, data on
 the host and data already on the device, beside SciPy on ≤ 200 scanlines), the
-time of each stage of one chunk, fits per second at a larger chunk, Ward
+time of each stage of one chunk, fits per second at a larger chunk, host-fed
+against device-resident rates at 10⁶ scanlines (``--feed``) and 10⁶ problems of
+9 samples (``--tiny``) with the copy alone beside them, Ward
 evaluations per second (beside NumPy), and the texture analysis + synthesis at
 1024² (beside pyrtools + NumPy on the host). Without a GPU it says so and exits
 0: the test suite and CI never need one (``--cpu`` runs it anyway, to check the
@@ -56,6 +58,59 @@ def stages(n: int) -> None:
         )
 
 
+def _rates(arrays, weighted: bool, dt, n: int, label: str) -> None:
+    """One row per (placement, errors): fits/s with the data from host memory (NumPy) and already on the device."""
+    import jax
+
+    import wardjax as wj
+    from wardjax.fit import _data
+
+    host = [np.ascontiguousarray(a, dt) for a in arrays]
+    if not weighted:
+        host[3] = None
+    t_check = _best(lambda: _data.validate(*host[:3], None, host[3]) and 0)
+    t_copy = _best(lambda: [jax.device_put(a) for a in host if a is not None])
+    with jax.enable_x64(True):
+        dev = jax.block_until_ready([None if a is None else jax.device_put(a) for a in host])
+    gb = sum(a.nbytes for a in host if a is not None) / 1e9
+    print(
+        f"  {label} {dt.name}, {'1/σ²' if weighted else 'no weights'}: {gb:.2f} GB; boundary checks {t_check:.3f} s,"
+        f" the copy alone (device_put) {t_copy:.3f} s = {gb / t_copy:.1f} GB/s = {n / t_copy:,.0f} scanlines/s"
+    )
+    for errors in ("gauss_newton", "auto"):
+        row = []
+        for where, a in (("host", host), ("device", dev)):
+            fit = lambda a=a, errors=errors: wj.fit_scanlines(a[0], a[1], a[2], weights=a[3], dtype=dt, errors=errors)
+            res = fit()  # compile
+            row.append((where, n / _best(fit), float(np.mean(res.ok))))
+        cells = "   ".join(f"{w} {r:>12,.0f} fits/s" for w, r, _ in row)
+        print(f"    {errors:>12}: {cells}   (converged {row[0][2]:.2%})", flush=True)
+
+
+def feed(n: int) -> None:
+    """fits/s at ``n`` scanlines × 256 samples from host memory and on the device, by dtype, weights and errors."""
+    from benchmarks.bench_fit import make_data
+
+    _, d = make_data(n, seed=n)
+    print(f"\n{n:,} scanlines × 256 samples: host-fed (NumPy) vs device-resident (jax.Array), best of 3:", flush=True)
+    arrays = (d.f_r, d.wi, d.wo, 1 / d.sigma**2)
+    _rates(arrays, True, np.dtype(np.float32), n, "f32 data")
+    _rates(arrays, False, np.dtype(np.float32), n, "f32 data")
+    _rates(arrays, True, np.dtype(np.float64), n, "f64 data")
+
+
+def tiny(n: int, k: int = 9) -> None:
+    """fits/s of ``n`` independent problems of ``k`` RGB samples (pixels seen in ``k`` photos), no weights."""
+    from benchmarks.bench_fit import draw_scanlines
+    from benchmarks.bench_tiny import SPAN
+
+    d = draw_scanlines(n, (0.03, 0.3), n=k, span=SPAN, seed=7)
+    print(f"\n{n:,} problems × {k} samples (no weights), best of 3:", flush=True)
+    arrays = (d.f_r, d.wi, d.wo, np.ones_like(d.f_r))
+    for dt in (np.float32, np.float64):
+        _rates(arrays, False, np.dtype(dt), n, f"{k} samples")
+
+
 def chunks(n: int, sizes: list[int]) -> None:
     """fits/s at ``n`` scanlines on the device by chunk size (GPU default: 131,072 with ≥ 32 GB, else 32,768)."""
     from benchmarks.bench_fit import make_data
@@ -88,6 +143,9 @@ def main(argv=None) -> int:
     ap.add_argument("--chunks", default="32768,131072", help="chunk sizes tried at the largest size")
     ap.add_argument("--synthesis", type=int, default=1024, help="texture side for bench_synthesis (0: skip)")
     ap.add_argument("--cpu", action="store_true", help="run without a GPU (to check this script)")
+    ap.add_argument("--only", default="", help="comma-separated sections: fit, stages, chunks, feed, tiny, synthesis")
+    ap.add_argument("--feed", type=int, default=1_000_000, help="scanlines of the host-fed vs device table")
+    ap.add_argument("--tiny", type=int, default=1_000_000, help="problems of the 9-sample table")
     args = ap.parse_args(argv)
     backend = jax.default_backend()
     if backend not in ("gpu", "cuda", "rocm") and not args.cpu:
@@ -97,11 +155,19 @@ def main(argv=None) -> int:
 
     sizes = [int(s) for s in args.sizes.split(",")]
     print(f"JAX {jax.__version__}, devices: {', '.join(d.device_kind for d in jax.devices())}", flush=True)
-    bench_fit.main(["--n", str(sizes[-1]), "--scipy", "200", "--ward-samples", "20000000"])
-    stages(min(32768, sizes[-1]))
-    chunks(sizes[-1], [int(c) for c in args.chunks.split(",")])
+    only = set(filter(None, args.only.split(","))) or {"fit", "stages", "chunks", "feed", "tiny", "synthesis"}
+    if "fit" in only:
+        bench_fit.main(["--n", str(sizes[-1]), "--scipy", "200", "--ward-samples", "20000000"])
+    if "stages" in only:
+        stages(min(32768, sizes[-1]))
+    if "chunks" in only:
+        chunks(sizes[-1], [int(c) for c in args.chunks.split(",")])
+    if "feed" in only:
+        feed(args.feed)
+    if "tiny" in only:
+        tiny(args.tiny)
     sys.stdout.flush()
-    if args.synthesis:
+    if args.synthesis and "synthesis" in only:
         bench_synthesis.main(args.synthesis)
     return 0
 
