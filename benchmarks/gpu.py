@@ -63,19 +63,21 @@ def _rates(arrays, weighted: bool, dt, n: int, label: str) -> None:
     import jax
 
     import wardjax as wj
-    from wardjax.fit import _data
+    from wardjax.fit import _data, _feed
 
     host = [np.ascontiguousarray(a, dt) for a in arrays]
     if not weighted:
         host[3] = None
     t_check = _best(lambda: _data.validate(*host[:3], None, host[3]) and 0)
     t_copy = _best(lambda: [jax.device_put(a) for a in host if a is not None])
+    t_fed = _best(lambda: _fed_copy(host))
     with jax.enable_x64(True):
         dev = jax.block_until_ready([None if a is None else jax.device_put(a) for a in host])
     gb = sum(a.nbytes for a in host if a is not None) / 1e9
     print(
         f"  {label} {dt.name}, {'1/σ²' if weighted else 'no weights'}: {gb:.2f} GB; boundary checks {t_check:.3f} s,"
-        f" the copy alone (device_put) {t_copy:.3f} s = {gb / t_copy:.1f} GB/s = {n / t_copy:,.0f} scanlines/s"
+        f" the copy alone (device_put) {t_copy:.3f} s = {gb / t_copy:.1f} GB/s = {n / t_copy:,.0f} scanlines/s;"
+        f" in chunks from {_feed.WORKERS} threads as the fit feeds them {t_fed:.3f} s = {gb / t_fed:.1f} GB/s"
     )
     for errors in ("gauss_newton", "auto"):
         row = []
@@ -87,7 +89,20 @@ def _rates(arrays, weighted: bool, dt, n: int, label: str) -> None:
         print(f"    {errors:>12}: {cells}   (converged {row[0][2]:.2%})", flush=True)
 
 
-def feed(n: int) -> None:
+def _fed_copy(host) -> list:
+    """The host arrays placed on the default device in fit-sized chunks by the fit's threaded feed."""
+    import jax
+
+    from wardjax.fit import _feed, _scanline
+
+    device = jax.devices()[0]
+    rows = _scanline._default_chunk(host[0].dtype, [device])
+    n = host[0].shape[0]
+    spans = [(i, min(i + rows, n), rows) for i in range(0, n, rows)]
+    return list(_feed.chunks(host, spans, lambda a: jax.device_put(a, device), threaded=True))
+
+
+def feed(n: int, f64: bool = False) -> None:
     """fits/s at ``n`` scanlines × 256 samples from host memory and on the device, by dtype, weights and errors."""
     from benchmarks.bench_fit import make_data
 
@@ -96,7 +111,8 @@ def feed(n: int) -> None:
     arrays = (d.f_r, d.wi, d.wo, 1 / d.sigma**2)
     _rates(arrays, True, np.dtype(np.float32), n, "f32 data")
     _rates(arrays, False, np.dtype(np.float32), n, "f32 data")
-    _rates(arrays, True, np.dtype(np.float64), n, "f64 data")
+    if f64:
+        _rates(arrays, True, np.dtype(np.float64), n, "f64 data")
 
 
 def tiny(n: int, k: int = 9) -> None:
@@ -145,6 +161,7 @@ def main(argv=None) -> int:
     ap.add_argument("--cpu", action="store_true", help="run without a GPU (to check this script)")
     ap.add_argument("--only", default="", help="comma-separated sections: fit, stages, chunks, feed, tiny, synthesis")
     ap.add_argument("--feed", type=int, default=1_000_000, help="scanlines of the host-fed vs device table")
+    ap.add_argument("--feed-f64", action="store_true", help="also float64 data in that table (24 GB at 10⁶)")
     ap.add_argument("--tiny", type=int, default=1_000_000, help="problems of the 9-sample table")
     args = ap.parse_args(argv)
     backend = jax.default_backend()
@@ -163,7 +180,7 @@ def main(argv=None) -> int:
     if "chunks" in only:
         chunks(sizes[-1], [int(c) for c in args.chunks.split(",")])
     if "feed" in only:
-        feed(args.feed)
+        feed(args.feed, args.feed_f64)
     if "tiny" in only:
         tiny(args.tiny)
     sys.stdout.flush()

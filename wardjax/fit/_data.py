@@ -55,6 +55,20 @@ def _any_negative_jit(a):
     return jnp.any(a < 0)
 
 
+NEGATIVE_WEIGHTS = "weights must be non-negative (they are 1/σ² per sample)"
+
+
+def negative_flag(a):
+    """``any(a < 0)`` of an array placed on its device, left there (a flag for :func:`check_sign`)."""
+    return _any_negative_jit(a)
+
+
+def check_sign(flags) -> None:
+    """Raise the negative-weights error if any chunk's flag (``_any_negative_jit`` on its device) is set."""
+    if any(bool(f) for f in flags):
+        raise ValueError(NEGATIVE_WEIGHTS)
+
+
 def _any_negative(a) -> bool:
     """``any(a < 0)`` where ``a`` is, on the host or on its device (float64 kept)."""
     if not _on_device(a):
@@ -63,11 +77,13 @@ def _any_negative(a) -> bool:
         return bool(_any_negative_jit(a))
 
 
-def validate(f_r, wi, wo, mask, weights):
+def validate(f_r, wi, wo, mask, weights, *, sign_later: bool = False):
     """Check shapes and types at the boundary (cheap); cleaning happens inside the kernel.
 
     NumPy inputs stay NumPy; :class:`jax.Array` inputs stay on their device (a
-    pipeline that keeps its data on a GPU pays no host round trip).
+    pipeline that keeps its data on a GPU pays no host round trip). ``sign_later``: NumPy
+    weights are not scanned here for negative values; the caller checks each chunk on its
+    device (:func:`check_sign`) and raises the same error before returning.
     """
     f = f_r if _on_device(f_r) else np.asarray(f_r)
     if f.ndim != 3 or f.shape[-1] != 3:
@@ -85,8 +101,8 @@ def validate(f_r, wi, wo, mask, weights):
             raise ValueError(
                 f"weights must have shape (S, N) or (S, N, 3) = {(s, n)} or {shape}, got {np.shape(weights)}"
             )
-        if _any_negative(wt):
-            raise ValueError("weights must be non-negative (they are 1/σ² per sample)")
+        if not (sign_later and not _on_device(wt)) and _any_negative(wt):
+            raise ValueError(NEGATIVE_WEIGHTS)
         weights = wt
     if mask is not None:
         m = mask if _on_device(mask) else np.asarray(mask)

@@ -44,12 +44,14 @@ import optimistix as optx
 from .. import _shapes
 from .._status import Status
 from ..ward import NORMALIZATIONS, WardParams, ward_geometry
-from . import _profile, _varpro
+from . import _feed, _profile, _varpro
 from ._data import (
     buckets,
     check_choice,
+    check_sign,
     clean,
     moments_chunk,
+    negative_flag,
     pad_rows,
     pad_samples,
     validate,
@@ -299,12 +301,15 @@ def fit_scanlines(
         raise ValueError(f"dtype must be float64 or float32, got {dtype}")
     if solver == "optimistix" and model != "isotropic":
         raise ValueError("solver='optimistix' fits the isotropic model; use res.combined() for anisotropy")
-    f, wi, wo, mask, weights = validate(f_r, wi, wo, mask, weights)
-    iso = model == "isotropic"
     devices = _check_devices(devices)
+    # Host memory feeding an accelerator: the weights' sign is checked on the device, chunk by chunk.
+    f, wi, wo, mask, weights = validate(
+        f_r, wi, wo, mask, weights, sign_later=_feed.host_fed((f_r, wi, wo, mask, weights), devices)
+    )
+    iso = model == "isotropic"
     chunk = int(chunk_size or _default_chunk(dtype, devices))
     data = (f, wi, wo, mask, weights)
-    kw = dict(iso=iso, normalization=normalization, solver=solver, devices=devices)
+    kw = dict(iso=iso, normalization=normalization, solver=solver, devices=devices, every_gn=errors == "profile")
     check = errors == "auto"
     # Without weights the residual variance is unknown and may follow the signal: the sandwich.
     sandwich = weights is None and errors != "gauss_newton" and solver == "fast"
@@ -380,7 +385,18 @@ def _sample_bucket(n: int) -> int:
 
 
 def _solve(
-    data, *, iso, normalization, solver, dtype, chunk, devices=None, check=True, sandwich=False, steps=None
+    data,
+    *,
+    iso,
+    normalization,
+    solver,
+    dtype,
+    chunk,
+    devices=None,
+    check=True,
+    sandwich=False,
+    steps=None,
+    every_gn=False,
 ) -> _varpro.ScanlineSolution:
     """Run the kernel over ``data = (f, wi, wo, mask, weights)`` in chunks; float64 NumPy results.
 
@@ -388,7 +404,8 @@ def _solve(
     of their number (zero weight, the true count passed as data), so batches
     whose scanlines differ a little in length share one compiled program.
     Each call holds ``chunk`` rows per device, split over ``devices``
-    (default ``jax.devices()``) along the scanline axis.
+    (default ``jax.devices()``) along the scanline axis. ``every_gn``: Gauss–Newton's
+    covariance of every row is wanted on the host (see :func:`_to_host`).
     """
     devices = _check_devices(devices)
     put = _placement(devices)
@@ -406,9 +423,15 @@ def _solve(
         # The profiles in the search program: float64 only (a float32 profile's χ² rises round too coarsely).
         profile_here = check and iso and solver == "fast" and dtype == np.float64
         pieces = []
-        for start, stop, rows in buckets(n_rows, chunk):
-            rows = -(-rows // len(devices)) * len(devices)  # whole rows on every device
-            args = [None if a is None else put(pad_rows(a[start:stop], rows)) for a in data]
+        # Whole rows on every device.
+        spans = [(a, b, -(-rows // len(devices)) * len(devices)) for a, b, rows in buckets(n_rows, chunk)]
+        threaded = _feed.host_fed(data, devices)
+        if threaded:
+            put = _placement(devices, direct=False)
+        signs = []
+        for (start, stop, rows), args in zip(spans, _feed.chunks(data, spans, put, threaded=threaded)):
+            if threaded and args[4] is not None:
+                signs.append(negative_flag(args[4]))  # validate left host weights' sign to the device
             if solver == "fast":
                 out = _fast_chunk(
                     *args,
@@ -424,9 +447,36 @@ def _solve(
                 )
             else:
                 out = _optimistix_chunk(*clean(*args, dtype=dtype), normalization=normalization)
-            pieces.append((out, stop - start))  # dispatched asynchronously
-        sol = [jax.tree_util.tree_map(lambda a, n=n: np.asarray(a)[:n], o) for o, n in pieces]
-        return jax.tree_util.tree_map(lambda *a: np.concatenate(a).astype(np.float64), *sol)
+            pieces.append((out, start, stop))  # dispatched asynchronously
+        check_sign(signs)
+        return _to_host(pieces, n_rows, sandwich=sandwich and solver == "fast", every_gn=every_gn)
+
+
+def _to_host(pieces, n_rows: int, *, sandwich: bool, every_gn: bool = False) -> _varpro.ScanlineSolution:
+    """The chunks' results as float64 NumPy arrays of ``n_rows`` rows, each value copied once into place.
+
+    Without the sandwich ``cov_gn`` is ``cov`` (the same array). With it, Gauss–Newton's covariance
+    crosses to the host only for the rows the profile pass reads (curvature check failed; every row
+    with ``every_gn``), NaN elsewhere: on an accelerator the results' copy, not the fit, bounds small
+    problems.
+    """
+    first = pieces[0][0]
+    skip = () if sandwich and every_gn else ("cov_gn",)
+    host = {k: np.empty((n_rows, *np.shape(v)[1:]), np.float64) for k, v in first._asdict().items() if k not in skip}
+    for out, start, stop in pieces:
+        got = jax.device_get({k: v for k, v in out._asdict().items() if k not in skip})
+        for k, v in got.items():
+            host[k][start:stop] = v[: stop - start]
+    if "cov_gn" in host:
+        return _varpro.ScanlineSolution(**host)
+    if not sandwich:
+        return _varpro.ScanlineSolution(**host, cov_gn=host["cov"])
+    cov_gn = np.full_like(host["cov"], np.nan)
+    for out, start, stop in pieces:
+        at = np.flatnonzero(host["nonlinear"][start:stop] == _profile.PENDING)
+        if at.size:
+            cov_gn[start + at] = np.asarray(out.cov_gn[jnp.asarray(at)])
+    return _varpro.ScanlineSolution(**host, cov_gn=cov_gn)
 
 
 def _profile_where_nonlinear(sol: _varpro.ScanlineSolution, data, *, normalization, devices=None) -> None:
@@ -474,8 +524,9 @@ def _assemble(sol, data, model, normalization, solver, sandwich=False) -> Scanli
     alpha = sol.alpha
     ax = alpha[:, 0]
     ay = alpha[:, -1]
-    var = np.diagonal(sol.cov, axis1=-2, axis2=-1)
-    se = np.sqrt(np.where(var >= 0, var, np.nan))
+    var = np.ascontiguousarray(np.diagonal(sol.cov, axis1=-2, axis2=-1))
+    with np.errstate(invalid="ignore"):
+        se = np.sqrt(var)  # NaN where a variance is negative, in one pass
     params = WardParams.from_estimate(rho_d=sol.rho_d, rho_s=sol.rho_s, alpha_x=ax, alpha_y=ay)
     stderr = WardParams.from_estimate(rho_d=se[:, :3], rho_s=se[:, 3], alpha_x=se[:, 4], alpha_y=se[:, -1])
     return ScanlineFit(
