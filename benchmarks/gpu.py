@@ -179,10 +179,10 @@ def main(argv=None) -> int:
         stages(min(32768, sizes[-1]))
     if "chunks" in only:
         chunks(sizes[-1], [int(c) for c in args.chunks.split(",")])
-    if "feed" in only:
-        feed(args.feed, args.feed_f64)
     if "tiny" in only:
         tiny(args.tiny)
+    if "feed" in only:
+        feed(args.feed, args.feed_f64)
     sys.stdout.flush()
     if args.synthesis and "synthesis" in only:
         bench_synthesis.main(args.synthesis)

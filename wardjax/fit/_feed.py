@@ -21,7 +21,7 @@ AHEAD = 2  # chunks copied ahead of the one computing
 WORKERS = 8  # host threads making the copies (each holds one array of one chunk)
 
 
-def host_fed(data: Sequence, devices: Sequence[jax.Device]) -> bool:
+def host_fed(data: Sequence, devices: Sequence) -> bool:
     """True when some array of ``data`` is in host memory and the devices are accelerators."""
     on_host = any(a is not None and not isinstance(a, jax.Array) for a in data)
     return on_host and devices[0].platform != "cpu"

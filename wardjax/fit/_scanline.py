@@ -34,7 +34,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
-from typing import Literal
+from typing import Any, Literal, cast
 
 import jax
 import jax.numpy as jnp
@@ -309,7 +309,9 @@ def fit_scanlines(
     iso = model == "isotropic"
     chunk = int(chunk_size or _default_chunk(dtype, devices))
     data = (f, wi, wo, mask, weights)
-    kw = dict(iso=iso, normalization=normalization, solver=solver, devices=devices, every_gn=errors == "profile")
+    kw: dict[str, Any] = dict(
+        iso=iso, normalization=normalization, solver=solver, devices=devices, every_gn=errors == "profile"
+    )
     check = errors == "auto"
     # Without weights the residual variance is unknown and may follow the signal: the sandwich.
     sandwich = weights is None and errors != "gauss_newton" and solver == "fast"
@@ -467,16 +469,17 @@ def _to_host(pieces, n_rows: int, *, sandwich: bool, every_gn: bool = False) -> 
         got = jax.device_get({k: v for k, v in out._asdict().items() if k not in skip})
         for k, v in got.items():
             host[k][start:stop] = v[: stop - start]
+    made = cast(Any, _varpro.ScanlineSolution)  # NumPy arrays in the kernel's NamedTuple
     if "cov_gn" in host:
-        return _varpro.ScanlineSolution(**host)
+        return made(**host)
     if not sandwich:
-        return _varpro.ScanlineSolution(**host, cov_gn=host["cov"])
+        return made(**host, cov_gn=host["cov"])
     cov_gn = np.full_like(host["cov"], np.nan)
     for out, start, stop in pieces:
         at = np.flatnonzero(host["nonlinear"][start:stop] == _profile.PENDING)
         if at.size:
             cov_gn[start + at] = np.asarray(out.cov_gn[jnp.asarray(at)])
-    return _varpro.ScanlineSolution(**host, cov_gn=cov_gn)
+    return made(**host, cov_gn=cov_gn)
 
 
 def _profile_where_nonlinear(sol: _varpro.ScanlineSolution, data, *, normalization, devices=None) -> None:
