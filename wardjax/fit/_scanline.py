@@ -241,8 +241,8 @@ def fit_scanlines(
         ``(S, N, 3)`` measured BRDF values (sr⁻¹), RGB. NaN or inf samples are
         ignored. Every array may be NumPy or a :class:`jax.Array`; a
         ``jax.Array`` is fitted on its device without a copy through the host
-        (on one H100, 10⁶ scanlines already on the GPU fit at 2.4 M/s in float64,
-        from host memory at 0.34 M/s: the copy dominates).
+        (on one H200, 10⁶ scanlines already on the GPU fit at 1.9–2.7 M/s in
+        float32; from host memory the copy bounds the rate: see the benchmarks page).
     wi, wo
         ``(S, N, 3)`` unit directions to the light and to the camera, away
         from the surface, in the sample frame (z = normal, x = tangent).
