@@ -8,7 +8,8 @@ the scanline along y through the highlight at an offset across it, RGB, 256 samp
 and unweighted (no weights: the default a user without a noise model gets).
 
 Per regime, side by side in one run: ``fit_scanlines`` with its defaults (``errors="auto"``)
-and with ``errors="gauss_newton"`` (best of three runs after compiling), SciPy LM with
+and with ``errors="gauss_newton"`` (best of five interleaved runs after compiling, and the spread of
+the paired CPU ratios over the runs), SciPy LM with
 2-point finite differences and with the analytic Jacobian from a generic start (ρd 0.5,
 ρs 0.05, α 0.1) on the first ``--scipy`` scanlines, the ratios, which σ the defaults
 reported, and the robust SD of (fit − truth)/σ for α and ρs (1 is honest). Then Ward
@@ -181,13 +182,18 @@ def bench_regime(d: Drawn, weighted: bool, scipy_n: int) -> dict:
         fit()  # compile
     # Interleaved, so that a change in the machine's load falls on both; wall and process CPU time.
     best = {e: [np.inf, np.inf] for e in fits}
+    paired = []  # per repeat: Gauss–Newton's CPU time over the default's, the two runs back to back
     for _ in range(REPEATS):
+        cpu = {}
         for e, fit in fits.items():
             t0, c0 = time.perf_counter(), time.process_time()
             res = fit()
-            best[e] = [min(best[e][0], time.perf_counter() - t0), min(best[e][1], time.process_time() - c0)]
+            cpu[e] = time.process_time() - c0
+            best[e] = [min(best[e][0], time.perf_counter() - t0), min(best[e][1], cpu[e])]
             out[e] = (len(d.alpha) / best[e][0], res)
+        paired.append(cpu["gauss_newton"] / cpu["auto"])
     out["cpu_ratio"] = best["gauss_newton"][1] / best["auto"][1]
+    out["cpu_spread"] = (float(np.median(paired)), min(paired), max(paired))
     m = min(scipy_n, len(d.alpha))
     for analytic in (False, True):
         sig = (lambda i: d.sigma[i]) if weighted else (lambda i: None)
@@ -207,25 +213,31 @@ def report_regime(name: str, weighted: bool, d: Drawn, out: dict) -> None:
     ga, gs = z_sd(gn, d)
     print(
         f"| {name} | {'1/σ²' if weighted else 'none'} | {rate:,.0f} | {gn_rate:,.0f} | {rate / gn_rate:.2f} | "
-        f"{out['cpu_ratio']:.2f} | "
+        f"{out['cpu_ratio']:.2f} | {spread(out['cpu_spread'])} | "
         f"{fd:,.0f} | {jac:,.0f} | {rate / fd:,.0f} | {rate / jac:,.0f} | {used} | "
         f"{za:.2f} / {zs:.2f} | {ga:.2f} / {gs:.2f} | {res.ok.mean():.1%} |",
         flush=True,
     )
 
 
+def spread(m: tuple[float, float, float]) -> str:
+    """``median (min–max)`` of the paired ratios."""
+    return f"{m[0]:.2f} ({m[1]:.2f}–{m[2]:.2f})"
+
+
 def bench_fits(n: int, scipy_n: int) -> None:
     print(
         f"{n:,} scanlines per regime (RGB, 256 samples, 1 % multiplicative noise); wardjax fits/s best of "
         f"{REPEATS} after compiling, default and gauss_newton interleaved (CPU: the ratio of best process CPU "
-        f"times, which a busy machine distorts less); SciPy LM on the first {scipy_n}. "
+        "times, which a busy machine distorts less; paired: the median and range over the repeats of the ratio of "
+        f"two runs back to back, the spread one ratio carries); SciPy LM on the first {scipy_n}. "
         "z-SD: robust SD of (fit − truth)/σ, α / ρs."
     )
     print(
-        "| lobes | weights | default fits/s | gauss_newton fits/s | default / GN | default / GN (CPU) | "
+        "| lobes | weights | default fits/s | gauss_newton fits/s | default / GN | default / GN (CPU) | paired (CPU) | "
         "SciPy FD | SciPy jac | × FD | × jac | σ reported | z-SD default | z-SD GN | converged |"
     )
-    print("| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |")
+    print("| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |")
     for k, (name, alpha_range) in enumerate(REGIMES.items()):
         d = draw_scanlines(n, alpha_range, seed=k)
         for weighted in (True, False):

@@ -7,7 +7,9 @@ no weights. Printed side by side in one run: ``fit_scanlines`` with its defaults
 (``errors="auto"``: HC3 sandwich, the curvature check, profiles where it fails) and with
 ``errors="gauss_newton"`` (best of three after compiling), SciPy ``least_squares(method="lm")``
 with the analytic Jacobian on the first ``--scipy`` problems, the ratios, the time 10⁶ problems
-would take at the measured rate, and the robust SD of (fit − truth)/σ of α and ρs.
+would take at the measured rate, and the robust SD of (fit − truth)/σ of α and ρs. Then where one
+chunk's time goes: the CPU time of each compiled stage (geometry, moments, the search alone, and with
+the curvature check, the sandwich and the in-program profiles added).
 
 Run: ``python -m benchmarks.bench_tiny [--n 100000] [--k 9] [--scipy 300]`` (under a minute on
 two cores).
@@ -19,9 +21,11 @@ import argparse
 import time
 
 import jax
+import jax.numpy as jnp
 import numpy as np
 
 import wardjax as wj
+from wardjax.fit import _data, _scanline
 
 from .bench_fit import REPEATS, _best_of, draw_scanlines, scipy_fit, z_sd
 
@@ -54,14 +58,60 @@ def bench_tiny(n: int, k: int, scipy_n: int) -> None:
     print(f"| SciPy LM, analytic Jacobian | {scipy_rate:,.0f} | {1e6 / scipy_rate:,.0f} s | 1 | | | |")
 
 
+def _cpu_ms(fn, repeats: int = 2 * REPEATS) -> float:
+    """Best process CPU time of ``fn()`` (its results ready) after one call to compile, in ms."""
+    jax.block_until_ready(fn())
+    best = float("inf")
+    for _ in range(repeats):
+        c0 = time.process_time()
+        jax.block_until_ready(fn())
+        best = min(best, time.process_time() - c0)
+    return 1e3 * best
+
+
+def stages(k: int, rows: int = 1024) -> None:
+    """Where a chunk's time goes: CPU ms of each compiled stage of one chunk of ``rows`` problems."""
+    d = draw_scanlines(rows, (0.03, 0.3), n=k, span=SPAN, seed=7)
+    with jax.enable_x64(True):
+        f64 = np.dtype(np.float64)
+        geometry = lambda: _scanline._geometry_chunk(d.f_r, d.wi, d.wo, None, None, normalization="ward1992", dtype=f64)
+        parts = geometry()
+        n = None if _scanline._sample_bucket(k) == k else jnp.asarray(k, jnp.int32)
+        moments = lambda: _data.moments_chunk(*parts, n, iso=True)
+        prep = moments()
+        lanes = _scanline._profile_lanes(rows, k)
+        search = lambda raw=None, check=False, lanes=0: _scanline._search_chunk(
+            prep, raw, iso=True, rtol=0.0, check=check, lanes=lanes
+        )
+        pending = float(np.mean(np.asarray(search(parts, True).nonlinear) != 0))
+        t = {
+            "geometry": _cpu_ms(geometry),
+            "moments": _cpu_ms(moments),
+            "search (Gauss–Newton)": _cpu_ms(search),
+            "search + curvature check": _cpu_ms(lambda: search(check=True)),
+            "search + sandwich": _cpu_ms(lambda: search(parts)),
+            "search + check + sandwich": _cpu_ms(lambda: search(parts, True)),
+            f"search + check + sandwich + profiles ({lanes} lanes)": _cpu_ms(lambda: search(parts, True, lanes)),
+        }
+    print(f"\nOne chunk of {rows:,} problems of {k} samples, CPU ms per compiled stage (best of {2 * REPEATS});")
+    print(f"the curvature check fails on {pending:.1%} of them (profiled in the search program)")
+    print("| stage | CPU ms | µs per fit |")
+    print("| --- | --- | --- |")
+    for name, ms in t.items():
+        print(f"| {name} | {ms:.2f} | {1e3 * ms / rows:.2f} |")
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--n", type=int, default=100_000, help="problems (pixels)")
     ap.add_argument("--k", type=int, default=9, help="samples per problem (photographs)")
     ap.add_argument("--scipy", type=int, default=300, help="problems SciPy fits")
+    ap.add_argument("--no-stages", action="store_true", help="skip the per-stage breakdown of one chunk")
     args = ap.parse_args(argv if argv is not None else [])
     print(f"JAX {jax.__version__} on {jax.devices()[0].platform}")
     bench_tiny(args.n, args.k, args.scipy)
+    if not args.no_stages:
+        stages(args.k)
 
 
 if __name__ == "__main__":

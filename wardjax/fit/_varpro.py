@@ -498,9 +498,8 @@ def curvature_pass(theta, chi2, s_hat, p: Prepared, cov, scale, e):
     ``64 ε K₀ / (χ²/dof)``, which matters in float32 only): the likelihood is not quadratic
     over one standard error (a lobe spanning few samples, a weakly detected lobe), and
     :func:`wardjax.fit._profile.profile_errors` replaces the standard errors of ρs and α by
-    profile-likelihood ones. ``verdict(sums)`` returns ``1`` where the check fails; the sums may
-    come from one reduction shared with other passes over the same samples
-    (:func:`solve_scanline` folds the sandwich's in).
+    profile-likelihood ones. ``verdict(sums)`` returns ``1`` where the check fails (the sums of
+    ``terms`` over the samples, e.g. by :func:`~wardjax.fit._sandwich.sum_samples`).
     """
     alpha = jnp.exp(theta[0])
     var_s, var_a, cov_sa = cov[3, 3], cov[4, 4], cov[3, 4]
@@ -520,8 +519,13 @@ def curvature_pass(theta, chi2, s_hat, p: Prepared, cov, scale, e):
     # Both points' sums (``Σ gw e'`` per column, ``Σ gwf e'``, ``Σ g2w e'²``) in one variadic reduction:
     # one loop that reads the streams once, where a mat-vec per sum re-read them (XLA's cost analysis:
     # 18 MB of memory traffic for the check of 1,024 scanlines of 256 samples, not 50 MB).
+    # The two points' exponentials materialised before the reduction (stacked behind a barrier): fused
+    # into it, XLA:CPU evaluated the exponential one value at a time inside the reduction's serial loop
+    # (these sums alone, 1,024 × 256 samples: 5.2–5.5 ms CPU fused, 2.1–2.6 ms materialised); a lone
+    # barrier did not survive fusion, the stacked one does.
+    both = jax.lax.optimization_barrier(jnp.stack([e_t for _, _, e_t in ends]))
     terms = []
-    for _, _, e_t in ends:
+    for e_t in both:
         terms += [*(p.gw * e_t[None, :]), p.gwf * e_t, p.g2w * e_t * e_t]
     return terms, lambda sums: _verdict(sums, theta, chi2, s_hat, p, scale, ends, sd_t, sd_s, sign_r, corner)
 
@@ -622,19 +626,16 @@ def solve_scanline(
             jnp.where(at_bound, Status.AT_BOUND, jnp.where(small, Status.CONVERGED, Status.MAX_STEPS)),
         ),
     )
-    # The curvature check and the sandwich, both sums over the samples at the optimum: one reduction,
-    # so that the samples are read once for both.
+    # The curvature check and the sandwich, both sums over the samples at the optimum: a reduction each.
+    # One variadic reduction of all 18 sums (samples read once) cost more than two (1,024 × 256 samples,
+    # under load: +10–12 ms CPU over the search alone, against +7–9 ms for two).
     passes = []
     if iso and check:
         passes.append(curvature_pass(theta, st.chi2, s, p, cov, scale, e))
     if raw is not None:
         mean = p.fbar - s * jnp.broadcast_to(st.bbar, (3,))
         passes.append(sandwich_pass(theta, s, cov, scale, *raw, mean=mean, e=e))
-    sums = sum_samples([t for terms, _ in passes for t in terms]) if passes else ()
-    done = []
-    for terms, finish in passes:
-        done.append(finish(sums[: len(terms)]))
-        sums = sums[len(terms) :]
+    done = [finish(sum_samples(terms)) for terms, finish in passes]
     nonlinear = done.pop(0) if iso and check else jnp.zeros((), jnp.int32)
     nonlinear = jnp.where(status == Status.CONVERGED, 2 * nonlinear, 0)  # 2: the profile is pending
     reported = done.pop(0) if raw is not None else cov
