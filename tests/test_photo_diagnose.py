@@ -27,6 +27,7 @@ import wardjax as wj
 from wardjax.effects import discover_photo
 from wardjax.effects._photo_checks import residual_where, unphysical
 from wardjax.effects._photo_held import HeldStructure, fit_gains_held
+from wardjax.effects._photo_model import fit_shared
 from wardjax.effects._photo_states import PhotoState, fit_state
 from wardjax.run import photo_data
 
@@ -163,3 +164,32 @@ def test_08_a_bumpy_multiview_sample_takes_its_normals_on_one_height_field(tmp_p
     ks = {c.effect: c.k for c in step.candidates}
     assert ks == {"height_field": 16 * 16 - 1, "normals": 2 * 16 * 16}
     assert step.evidence.holdout is not None and step.evidence.holdout.passed  # and it predicts the other views
+
+
+def test_09_the_shared_fit_agrees_with_scipy(vignetted):
+    """:func:`fit_shared` (optimistix LM, padded to a size bucket) against SciPy's bounded trust-region fit
+    of the same projected residuals, written here apart: the same optimum, χ² and σ."""
+    from scipy.optimize import least_squares
+
+    data, names = vignetted, ("vignetting",)
+    fit = fit_shared(data, names)
+    u, v, n = data.lobe_geometry
+    sw = data.w.sum(1)
+
+    def residuals(x):
+        g = (1.0 + data.radius2 * (x[1] + x[2] * data.radius2))[..., None]
+        f, w = data.f / g, data.w * g * g
+        lobe = (n * np.exp(-(u + v) / np.exp(2 * x[0])) / np.exp(2 * x[0]))[..., None]
+        sw = w.sum(1)[:, None]
+        ft, lt = f - (w * f).sum(1)[:, None] / sw, lobe - (w * lobe).sum(1)[:, None] / sw
+        s = max(np.sum(w * ft * lt), 0.0) / np.sum(w * lt * lt)
+        return (np.sqrt(w) * (ft - s * lt)).ravel()
+
+    assert np.all(sw > 0)
+    ref = least_squares(residuals, fit.x + [0.1, 0.05, -0.05], bounds=([-7, -3, -3], [0.7, 3, 3]), xtol=1e-12)
+    sd = np.sqrt(np.diag(np.linalg.inv(ref.jac.T @ ref.jac)))
+    assert fit.x == pytest.approx(ref.x, abs=1e-3 * sd.max())
+    assert fit.chi2 == pytest.approx(2 * ref.cost, rel=1e-9)
+    assert fit.sigma["vignetting"] == pytest.approx(tuple(sd[1:]), rel=1e-3)
+    assert fit.alpha_sigma == pytest.approx(fit.alpha * sd[0], rel=1e-3)
+    assert abs(fit.effects["vignetting"][0] + 0.3) < 4 * fit.sigma["vignetting"][0]  # the truth within 4σ
