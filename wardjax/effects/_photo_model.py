@@ -216,27 +216,30 @@ class SharedFit(NamedTuple):
     x: np.ndarray
 
 
-class _Geometry(NamedTuple):
-    """What a radial gain reads (``RadialEffect.gain(θ, d)``), as JAX arrays ``(P, V)``."""
+_Arr = jax.Array | np.ndarray | np.floating
 
-    radius2: jax.Array
-    lamp_cos: jax.Array
+
+class _Geometry(NamedTuple):
+    """What a radial gain reads (``RadialEffect.gain(θ, d)``), ``(P, V)`` JAX or NumPy arrays."""
+
+    radius2: _Arr
+    lamp_cos: _Arr
 
 
 class _Args(NamedTuple):
-    """A fit's data as JAX float64 arrays: ``f``, ``w`` ``(P, V, C)`` (``w`` 0 on views not fitted),
-    the lobe's ``u``, ``v``, ``N`` and the gains' covariates ``(P, V)``, the bounds' middles and
-    half-widths ``(1 + n,)`` (``log α`` first), and the largest ρs."""
+    """A fit's data as float64 arrays (NumPy, or JAX inside the fit): ``f``, ``w`` ``(P, V, C)`` (``w`` 0
+    on views not fitted), the lobe's ``u``, ``v``, ``N`` and the gains' covariates ``(P, V)``, the bounds'
+    middles and half-widths ``(1 + n,)`` (``log α`` first), and the largest ρs."""
 
-    f: jax.Array
-    w: jax.Array
-    u: jax.Array
-    v: jax.Array
-    n: jax.Array
+    f: _Arr
+    w: _Arr
+    u: _Arr
+    v: _Arr
+    n: _Arr
     geom: _Geometry
-    mid: jax.Array
-    half: jax.Array
-    s_max: jax.Array
+    mid: _Arr
+    half: _Arr
+    s_max: _Arr
 
 
 def _bucket(n: int) -> int:
