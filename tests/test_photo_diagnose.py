@@ -17,6 +17,7 @@ code, ρd per block, noise of known σ, the lamp 80 mm from the lens):
 
 from __future__ import annotations
 
+import dataclasses
 import json
 
 import numpy as np
@@ -61,6 +62,17 @@ def test_02_one_photo_does_not_try_normals_and_says_why(tmp_path):
     doc = json.loads(paths["report.json"].read_text())
     assert doc["not_identifiable"] == rep.not_identifiable and doc["residual"]["map"] == "residual.png"
     assert paths["residual.png"].is_file() and "## Not identifiable" in paths["report.md"].read_text()
+    assert doc["refused"] == [] and "## Refused" not in paths["report.md"].read_text()
+    # a radial effect refused after the structure's refit is recorded as the accepted ones are
+    no = {"step": 1, "effect": "vignetting", "why": "refitted with the structure it does not lower the gap (χ²/dof)"}
+    no |= {"gap_before": 1.31, "gap_after": 1.32, "delta_bic_held": 40.5}
+    no |= {"params": {"a1": -0.2, "a2": 0.01}, "stderr": {"a1": 0.01, "a2": 0.02}}
+    paths = dataclasses.replace(rep, refused=[no]).save(tmp_path / "refused")
+    assert json.loads(paths["report.json"].read_text())["refused"] == [no]
+    md = paths["report.md"].read_text()
+    assert "## Refused: no lower gap once the structure is refitted (not named)" in md
+    assert "- step 1: vignetting (a1 = -0.2 ± 0.01, a2 = 0.01 ± 0.02; ΔBIC 40.5 on the held structure): " in md
+    assert "gap 1.31 → 1.32 refitted" in md
 
 
 @pytest.fixture(scope="module")
