@@ -59,6 +59,8 @@ def test_02_each_real_photo_diagnosed_from_the_cli(tmp_path, name):
     assert (out / "residual.png").is_file() and doc["residual"]["pixel_rho_d_share"] == pytest.approx(1)
     assert doc["capture"] == name and set(doc["found"]) <= set(PHOTO_EFFECTS)
     assert len(doc["gap"]) == len(doc["found"]) + 1 and all(b <= a for a, b in zip(doc["gap"], doc["gap"][1:]))
+    for no in doc["refused"]:  # a radial effect refused after the structure's refit: its gaps, not named
+        assert no["gap_after"] >= no["gap_before"] and no["effect"] not in doc["found"], no
     assert f"{name}: {doc['verdict']}" in " ".join(r.output.split())  # the console wraps long lines
     labels = np.load(out / "labels.npy")
     rows, cols, block = doc["labels"]["grid"]

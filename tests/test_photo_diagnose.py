@@ -17,6 +17,7 @@ code, ρd per block, noise of known σ, the lamp 80 mm from the lens):
 
 from __future__ import annotations
 
+import dataclasses
 import json
 
 import numpy as np
@@ -27,6 +28,7 @@ import wardjax as wj
 from wardjax.effects import discover_photo
 from wardjax.effects._photo_checks import residual_where, unphysical
 from wardjax.effects._photo_held import HeldStructure, fit_gains_held
+from wardjax.effects._photo_model import fit_shared
 from wardjax.effects._photo_states import PhotoState, fit_state
 from wardjax.run import photo_data
 
@@ -60,6 +62,17 @@ def test_02_one_photo_does_not_try_normals_and_says_why(tmp_path):
     doc = json.loads(paths["report.json"].read_text())
     assert doc["not_identifiable"] == rep.not_identifiable and doc["residual"]["map"] == "residual.png"
     assert paths["residual.png"].is_file() and "## Not identifiable" in paths["report.md"].read_text()
+    assert doc["refused"] == [] and "## Refused" not in paths["report.md"].read_text()
+    # a radial effect refused after the structure's refit is recorded as the accepted ones are
+    no = {"step": 1, "effect": "vignetting", "why": "refitted with the structure it does not lower the gap (χ²/dof)"}
+    no |= {"gap_before": 1.31, "gap_after": 1.32, "delta_bic_held": 40.5}
+    no |= {"params": {"a1": -0.2, "a2": 0.01}, "stderr": {"a1": 0.01, "a2": 0.02}}
+    paths = dataclasses.replace(rep, refused=[no]).save(tmp_path / "refused")
+    assert json.loads(paths["report.json"].read_text())["refused"] == [no]
+    md = paths["report.md"].read_text()
+    assert "## Refused: no lower gap once the structure is refitted (not named)" in md
+    assert "- step 1: vignetting (a1 = -0.2 ± 0.01, a2 = 0.01 ± 0.02; ΔBIC 40.5 on the held structure): " in md
+    assert "gap 1.31 → 1.32 refitted" in md
 
 
 @pytest.fixture(scope="module")
@@ -163,3 +176,32 @@ def test_08_a_bumpy_multiview_sample_takes_its_normals_on_one_height_field(tmp_p
     ks = {c.effect: c.k for c in step.candidates}
     assert ks == {"height_field": 16 * 16 - 1, "normals": 2 * 16 * 16}
     assert step.evidence.holdout is not None and step.evidence.holdout.passed  # and it predicts the other views
+
+
+def test_09_the_shared_fit_agrees_with_scipy(vignetted):
+    """:func:`fit_shared` (optimistix LM, padded to a size bucket) against SciPy's bounded trust-region fit
+    of the same projected residuals, written here apart: the same optimum, χ² and σ."""
+    from scipy.optimize import least_squares
+
+    data, names = vignetted, ("vignetting",)
+    fit = fit_shared(data, names)
+    u, v, n = data.lobe_geometry
+    sw = data.w.sum(1)
+
+    def residuals(x):
+        g = (1.0 + data.radius2 * (x[1] + x[2] * data.radius2))[..., None]
+        f, w = data.f / g, data.w * g * g
+        lobe = (n * np.exp(-(u + v) / np.exp(2 * x[0])) / np.exp(2 * x[0]))[..., None]
+        sw = w.sum(1)[:, None]
+        ft, lt = f - (w * f).sum(1)[:, None] / sw, lobe - (w * lobe).sum(1)[:, None] / sw
+        s = max(np.sum(w * ft * lt), 0.0) / np.sum(w * lt * lt)
+        return (np.sqrt(w) * (ft - s * lt)).ravel()
+
+    assert np.all(sw > 0)
+    ref = least_squares(residuals, fit.x + [0.1, 0.05, -0.05], bounds=([-7, -3, -3], [0.7, 3, 3]), xtol=1e-12)
+    sd = np.sqrt(np.diag(np.linalg.inv(ref.jac.T @ ref.jac)))
+    assert fit.x == pytest.approx(ref.x, abs=1e-3 * sd.max())
+    assert fit.chi2 == pytest.approx(2 * ref.cost, rel=1e-9)
+    assert fit.sigma["vignetting"] == pytest.approx(tuple(sd[1:]), rel=1e-3)
+    assert fit.alpha_sigma == pytest.approx(fit.alpha * sd[0], rel=1e-3)
+    assert abs(fit.effects["vignetting"][0] + 0.3) < 4 * fit.sigma["vignetting"][0]  # the truth within 4σ

@@ -80,22 +80,21 @@ def test_heldout_error_falls_as_effects_are_added_on_mild_bumps():
     predicted better by per-cluster lobes than by one lobe, and better again with a normal per pixel."""
     scene = flash_views((32, 32), bump_amplitude=0.15)
     data = flash_views_data(scene, seed=0)
-    keep = [i for i in range(scene.n_views) if i != 4]
-    noise = np.sqrt(np.mean(data.sigma[:, 4] ** 2))
     errors = []
     for lobe, normals in (("shared", False), ("clusters", False), ("clusters", True)):
-        res = wj.fit_pixels(
-            data.f_r[:, keep],
-            data.wi[:, keep],
-            data.wo[:, keep],
-            weights=data.sigma[:, keep] ** -2,
-            lobe=lobe,
-            normals=normals,
-            normalization=NORM,
+        held = wj.heldout_pixels(
+            data.f_r, data.wi, data.wo, 4, weights=data.sigma**-2, lobe=lobe, normals=normals, normalization=NORM
         )
-        pred = np.asarray(wj.predict_pixels(res, data.wi[:, [4]], data.wo[:, [4]]))[:, 0]
-        errors.append(np.sqrt(np.mean((pred - data.f_r[:, 4]) ** 2)) / noise)
+        errors.append(held.ratio)
         if lobe == "clusters":
-            assert res.n_lobes == 2, (normals, res.evidence["clusters"])
+            assert held.fit.n_lobes == 2, (normals, held.fit.evidence["clusters"])
     assert errors[0] > 1.1 * errors[1] and errors[1] > 5 * errors[2], errors
     assert errors[2] < 1.5, errors
+
+
+def test_heldout_pixels_refuses_a_photo_it_does_not_have():
+    f = np.zeros((4, 3, 3))
+    with pytest.raises(ValueError, match=r"^k = 3 is not a photo of the 3: expected 0 ≤ k < 3$"):
+        wj.heldout_pixels(f, f, f, 3)
+    with pytest.raises(ValueError, match=r"holding a photo out needs \(P, K, C\) with K ≥ 2"):
+        wj.heldout_pixels(f[:, :1], f[:, :1], f[:, :1], 0)

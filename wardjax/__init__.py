@@ -81,6 +81,7 @@ if TYPE_CHECKING:  # the API as the type checker and the reader see it
     from .fit import PixelFit as PixelFit
     from .fit import fit_pixels as fit_pixels
     from .fit import predict_pixels as predict_pixels
+    from .fit import heldout_pixels as heldout_pixels
     from .capture import PhotoCapture as PhotoCapture
     from .capture import import_capture as import_capture
     from .run import PhotoFit as PhotoFit
@@ -149,6 +150,7 @@ _API = {
     "PixelFit": ".fit",
     "fit_pixels": ".fit",
     "predict_pixels": ".fit",
+    "heldout_pixels": ".fit",
     "PhotoCapture": ".capture",
     "import_capture": ".capture",
     "PhotoFit": ".run",
@@ -216,6 +218,7 @@ __all__ = [
     "PixelFit",
     "fit_pixels",
     "predict_pixels",
+    "heldout_pixels",
     "PhotoCapture",
     "import_capture",
     "PhotoFit",

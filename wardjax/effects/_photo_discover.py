@@ -260,7 +260,7 @@ def discover_photo(
     skipped = {n: why for n, why in not_identifiable(data).items() if n in names}
     names = tuple(n for n in names if n not in skipped)
     state, cur = PhotoState(), fit_state(PhotoState(), data)
-    baseline, gaps, steps, partial, ambiguous, broken = cur, [cur.gap], [], [], [], []
+    baseline, gaps, steps, partial, ambiguous, broken, refused = cur, [cur.gap], [], [], [], [], []
     for _ in range(max_steps):
         if steps and _within_noise(cur):
             break
@@ -280,6 +280,7 @@ def discover_photo(
                 broken.append({"step": len(steps), "why": why, "gap": cur.gap, "gap_bounded": None})
         found = _step(state, cur, remaining, bool(why), data, ln_n, alpha, len(steps) + 1, progress)
         partial += found.partial
+        refused += found.refused
         chosen, new = found.chosen, found.fit
         if chosen is None or new is None:
             if state.bounded and not steps:  # nothing found on the bounded lobe: the baseline as fitted stands
@@ -314,6 +315,7 @@ def discover_photo(
         not_identifiable=skipped,
         unphysical=broken,
         where=residual_where(cur, state, data),
+        refused=refused,
     )
 
 
@@ -322,6 +324,7 @@ class _Found(NamedTuple):
     fit: StateFit | None
     candidates: list
     partial: list
+    refused: list
 
 
 def _step(state, cur, remaining, radial_first, data, ln_n, alpha, i, progress) -> _Found:
@@ -340,7 +343,7 @@ def _step(state, cur, remaining, radial_first, data, ln_n, alpha, i, progress) -
             ref.append(fit_state(state, data, pixels=True))
         return ref[0]
 
-    all_cands, partial = [], []
+    all_cands, partial, refused = [], [], []
     for group in groups:
         progress(f"step {i}: testing {len(group)} candidate effects ({', '.join(group)})")
         scored = {}
@@ -371,9 +374,26 @@ def _step(state, cur, remaining, radial_first, data, ln_n, alpha, i, progress) -
                 # is added only if the refit lowers the gap (χ²/dof), what the steps report
                 if fit.gap >= cur.gap:
                     progress(f"step {i}: {c.effect} refitted with the structure does not lower the gap; not added")
+                    refused.append(_refused(i, c, cur, fit))
                     continue
             elif normals_held is not None:
                 progress(f"step {i}: {c.effect} refitted with its normals")
                 fit = fit_state(state.plus(c.effect), data, start=cur.shared)
-            return _Found(c, fit, all_cands, partial)
-    return _Found(None, None, all_cands, partial)
+            return _Found(c, fit, all_cands, partial, refused)
+    return _Found(None, None, all_cands, partial, refused)
+
+
+def _refused(i: int, c: Candidate, cur: StateFit, fit: StateFit) -> dict:
+    """A radial effect that passed its evidence and hold-out on the held structure, refused because the
+    structure refitted with it does not lower the gap: its step, why, the gap before and after, its parameters."""
+    sd = fit.shared.sigma.get(c.effect, ())
+    return {
+        "step": i,
+        "effect": c.effect,
+        "why": "refitted with the structure it does not lower the gap (χ²/dof)",
+        "gap_before": cur.gap,
+        "gap_after": fit.gap,
+        "delta_bic_held": c.delta_bic,
+        "params": dict(zip(RADIAL[c.effect].params, fit.shared.effects.get(c.effect, ()))),
+        "stderr": dict(zip(RADIAL[c.effect].params, sd)),
+    }

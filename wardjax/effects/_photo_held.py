@@ -34,7 +34,7 @@ import jax.numpy as jnp
 import numpy as np
 import optimistix as optx
 
-from ._photo_model import RADIAL, PhotoData, SharedFit
+from ._photo_model import RADIAL, PhotoData, SharedFit, _gain, _Geometry
 
 __all__ = ["HeldStructure", "chi2_gains_held", "fit_gains_held"]
 
@@ -59,13 +59,6 @@ class HeldStructure:
         return cls(one[..., 0] - spec, spec)
 
 
-class _Geometry(NamedTuple):
-    """What a radial gain reads of :class:`PhotoData` (``RadialEffect.gain(θ, d)``), as JAX arrays."""
-
-    radius2: jax.Array
-    lamp_cos: jax.Array
-
-
 class _Args(NamedTuple):
     f: jax.Array  # (P, V, C)
     w: jax.Array  # (P, V, C): the weights of the views fitted
@@ -76,20 +69,11 @@ class _Args(NamedTuple):
     half: jax.Array  # (n,) the bounds' half-widths
 
 
-def _gains_jax(theta, names: tuple[str, ...], geom: _Geometry):
-    g, i = jnp.ones_like(geom.radius2), 0
-    for n in names:
-        k = len(RADIAL[n].params)
-        g = g * RADIAL[n].gain(theta[i : i + k], geom)  # pyright: ignore[reportArgumentType]
-        i += k
-    return g
-
-
 def _residuals_jax(theta, names: tuple[str, ...], a: _Args, kappa=None):
     """``√w (f − G (q a + κ S))`` with ``a`` and, unless given, ``κ ≥ 0`` profiled (variable projection); and κ.
 
     A gain at or below :data:`_MIN_GAIN` where a view is seen is no gain: every residual is then 10⁶."""
-    g = _gains_jax(theta, names, a.geom)
+    g = _gain(theta, names, a.geom)
     seen = jnp.any(a.w > 0, -1)
     bad = jnp.any(seen & (g <= _MIN_GAIN))
     gq, gs = (g * a.q)[..., None], (g * a.spec)[..., None]

@@ -27,9 +27,17 @@ Given ``α`` and the gains the model is linear in ``a`` (per problem and
 channel) and ``s = ρs``: dividing the data by ``G`` (``f/G``, weights
 ``w G²``) leaves the baseline's least-squares problem, whose ``a`` and ``s``
 follow in closed form (variable projection, Golub & Pereyra 1973;
-``s ≥ 0``). ``log α`` and the gains' parameters are fitted by
-:func:`scipy.optimize.least_squares` on the projected residuals; their
-covariance is ``(JᵀJ)⁻¹`` of that fit.
+``s ≥ 0``). ``log α`` and the gains' parameters ``x`` are fitted by
+:class:`optimistix.LevenbergMarquardt` on the projected residuals, in float64,
+in coordinates ``u`` free of their bounds, ``x = m + h tanh u`` (``m``, ``h``
+the middle and half-width of each bound), from the best ``log α`` of a grid
+(or a fit made before); their covariance is ``(JᵀJ)⁻¹``, ``J = ∂r/∂x`` at the
+solution (central differences; the grid and ``J`` are evaluated on the host,
+in NumPy, to keep the compiled program to the LM loop). Each step's damped system is solved by its normal equations (a
+Cholesky factor of ``JᵀJ + λI``, at most 4 × 4: a smaller program than a QR
+of ``J``). One compiled program serves every set of gains (those not fitted
+held at 0, no gain) and every capture of a size bucket: the problems and
+views are padded with unweighted ones to the next power of two.
 """
 
 from __future__ import annotations
@@ -40,7 +48,11 @@ import math
 from collections.abc import Callable
 from typing import NamedTuple
 
+import jax
+import jax.numpy as jnp
+import lineax as lx
 import numpy as np
+import optimistix as optx
 
 from ..ward import ward_geometry
 
@@ -204,33 +216,131 @@ class SharedFit(NamedTuple):
     x: np.ndarray
 
 
-def _gain(data: PhotoData, effects: dict[str, np.ndarray]) -> np.ndarray:
-    g = np.ones(data.radius2.shape)
-    for name, t in effects.items():
-        g = g * RADIAL[name].gain(np.asarray(t), data)
+_Arr = jax.Array | np.ndarray | np.floating
+
+
+class _Geometry(NamedTuple):
+    """What a radial gain reads (``RadialEffect.gain(θ, d)``), ``(P, V)`` JAX or NumPy arrays."""
+
+    radius2: _Arr
+    lamp_cos: _Arr
+
+
+class _Args(NamedTuple):
+    """A fit's data as float64 arrays (NumPy, or JAX inside the fit): ``f``, ``w`` ``(P, V, C)`` (``w`` 0
+    on views not fitted), the lobe's ``u``, ``v``, ``N`` and the gains' covariates ``(P, V)``, the bounds'
+    middles and half-widths ``(1 + n,)`` (``log α`` first), and the largest ρs."""
+
+    f: _Arr
+    w: _Arr
+    u: _Arr
+    v: _Arr
+    n: _Arr
+    geom: _Geometry
+    mid: _Arr
+    half: _Arr
+    s_max: _Arr
+
+
+def _bucket(n: int) -> int:
+    return 1 << max(int(n) - 1, 0).bit_length()
+
+
+_ALL = tuple(RADIAL)  # every gain: one compiled fit serves each set of them, the others held at 0 (no gain)
+
+
+def _layout(names: tuple[str, ...]) -> np.ndarray:
+    """The places in ``x = (log α, every gain's parameters in the order of RADIAL)`` of ``(log α, names' …)``."""
+    start = dict(zip(_ALL, np.cumsum([1] + [len(RADIAL[n].params) for n in _ALL])))
+    return np.array([0] + [int(start[n]) + i for n in names for i in range(len(RADIAL[n].params))], int)
+
+
+def _args(data: PhotoData, keep: np.ndarray, bounded: bool = False, pad: bool = False) -> _Args:
+    """:class:`_Args` of the views ``keep (P, V)``; ``pad``: problems and views padded to powers of two
+    with unweighted views (gain 1, a lobe of 0), which change no residual."""
+    top, s_max = (math.log(BOUNDED["alpha"]), BOUNDED["rho_s"]) if bounded else (_LOG_ALPHA[1], math.inf)
+    lo = np.array([_LOG_ALPHA[0]] + [b[0] for n in _ALL for b in RADIAL[n].bounds])
+    hi = np.array([top] + [b[1] for n in _ALL for b in RADIAL[n].bounds])
+    p, v = data.radius2.shape
+    shape = (_bucket(p), _bucket(v)) if pad else (p, v)
+
+    def put(a, fill=0.0):
+        out = np.full(shape + a.shape[2:], fill)
+        out[:p, :v] = a
+        return out
+
+    u, vv, n = data.lobe_geometry
+    return _Args(
+        put(data.f),
+        put(data.w * keep[..., None]),
+        put(u),
+        put(vv),
+        put(n),
+        _Geometry(put(data.radius2), put(data.lamp_cos, 1.0)),
+        (lo + hi) / 2,
+        (hi - lo) / 2,
+        np.float64(s_max),
+    )
+
+
+def _gain(theta, names: tuple[str, ...], geom):
+    """``(P, V)`` the product of the gains ``names`` at their parameters ``theta`` (NumPy or JAX, as given)."""
+    g, i = geom.radius2 * 0.0 + 1.0, 0
+    for n in names:
+        k = len(RADIAL[n].params)
+        g = g * RADIAL[n].gain(theta[i : i + k], geom)
+        i += k
     return g
 
 
-def _lobe(data: PhotoData, geom, log_alpha: float) -> np.ndarray:
-    u, v, n = geom
-    a2 = math.exp(2.0 * log_alpha)
-    return n * np.exp(-(u + v) / a2) / a2
-
-
-def _projected(f, w, lobe, s=None, s_max=math.inf):
-    """Residuals ``√w (f − a − s L)`` with ``a`` (per problem and channel) and, unless given, ``0 ≤ s ≤ s_max``
-    profiled."""
+def _residuals(x, a: _Args, s=None, xp=jnp):
+    """``√w (f/G − a − s L)`` (weights ``w G²``) at ``x = (log α, every gain's parameters)``, with ``a`` per
+    problem and channel and, unless given, ``0 ≤ s ≤ s_max`` profiled; and ``s``. A gain at or below
+    :data:`_MIN_GAIN` on a seen view is no lens or lamp: every residual is then 10⁶. ``xp``: ``jax.numpy``
+    (traced into the fit) or ``numpy`` (the grid, the Jacobian and the checks, on the host)."""
+    g = _gain(x[1:], _ALL, a.geom)
+    bad = xp.any(xp.any(a.w > 0, -1) & (g <= _MIN_GAIN))
+    g = xp.where(g > _MIN_GAIN, g, 1.0)[..., None]
+    f, w = a.f / g, a.w * g * g
+    a2 = xp.exp(2.0 * x[0])
+    lobe = (a.n * xp.exp(-(a.u + a.v) / a2) / a2)[..., None]
     s0 = w.sum(1)
-    ok = s0 > 0
-    inv = np.where(ok, 1.0 / np.where(ok, s0, 1.0), 0.0)
-    fm = (w * f).sum(1) * inv
-    lm = (w * lobe[..., None]).sum(1) * inv
-    ft = f - fm[:, None]
-    lt = lobe[..., None] - lm[:, None]
+    inv = xp.where(s0 > 0, 1.0 / xp.where(s0 > 0, s0, 1.0), 0.0)
+    ft = f - ((w * f).sum(1) * inv)[:, None]
+    lt = lobe - ((w * lobe).sum(1) * inv)[:, None]
     if s is None:
-        bb = float(np.sum(w * lt * lt))
-        s = min(max(float(np.sum(w * ft * lt)), 0.0) / bb if bb > 0 else 0.0, s_max)
-    return np.sqrt(w) * (ft - s * lt), s
+        bb = xp.sum(w * lt * lt)
+        s = xp.minimum(xp.where(bb > 0, xp.maximum(xp.sum(w * ft * lt), 0.0) / xp.where(bb > 0, bb, 1.0), 0.0), a.s_max)
+    return xp.where(bad, 1e6, xp.sqrt(a.w) * g * (ft - s * lt)), s  # √(w G²), differentiable where w = 0
+
+
+@jax.jit
+def _solve(x0, free, a: _Args):
+    """LM in the unbounded ``u`` from ``x0``, the parameters not ``free`` held at 0; returns ``x``."""
+
+    def x_of(u):
+        return jnp.where(free, a.mid + a.half * jnp.tanh(u), 0.0)
+
+    sol = optx.least_squares(
+        lambda u, _: _residuals(x_of(u), a)[0].ravel(),
+        optx.LevenbergMarquardt(rtol=1e-10, atol=1e-12, linear_solver=lx.Normal(lx.Cholesky())),
+        jnp.arctanh(jnp.clip((x0 - a.mid) / a.half, -1 + 1e-9, 1 - 1e-9)),
+        max_steps=256,
+        throw=False,
+    )
+    return x_of(sol.value)
+
+
+def _jacobian(x: np.ndarray, at: np.ndarray, a: _Args) -> np.ndarray:
+    """``(M, len(at))`` ``∂r/∂x`` of the parameters ``at`` by central differences (host, float64)."""
+    cols = []
+    for i in at:
+        h = 1e-6 * max(1.0, abs(float(x[i])))
+        up, down = x.copy(), x.copy()
+        up[i] += h
+        down[i] -= h
+        cols.append((_residuals(up, a, xp=np)[0] - _residuals(down, a, xp=np)[0]).ravel() / (2 * h))
+    return np.stack(cols, -1)
 
 
 def _split(x: np.ndarray, names: tuple[str, ...]) -> dict[str, np.ndarray]:
@@ -240,15 +350,6 @@ def _split(x: np.ndarray, names: tuple[str, ...]) -> dict[str, np.ndarray]:
         out[n] = x[i : i + k]
         i += k
     return out
-
-
-def _residuals(x, data, geom, names, keep, s=None, s_max=math.inf):
-    g = _gain(data, _split(x, names))
-    w = data.w * keep[..., None]
-    if np.any(g[keep & np.any(w > 0, -1)] <= _MIN_GAIN):
-        return np.full(data.f.size, 1e6), 0.0
-    gg = g[..., None]
-    return _projected(data.f / gg, w * gg * gg, _lobe(data, geom, float(x[0])), s, s_max)
 
 
 def fit_shared(
@@ -264,65 +365,68 @@ def fit_shared(
     without it α starts from the best of a grid. ``bounded``: the lobe held within what a material has,
     ``α ≤ 1`` and ``ρs ≤ 1`` (:data:`BOUNDED`).
     """
-    from scipy.optimize import least_squares
-
     keep = np.ones(data.radius2.shape, bool) if keep is None else keep
-    geom = data.lobe_geometry
     before = {} if start is None else start.effects
-    theta0 = [v for n in names for v in (before.get(n) or (0.0,) * len(RADIAL[n].params))]
-    s_max, top = (BOUNDED["rho_s"], math.log(BOUNDED["alpha"])) if bounded else (math.inf, _LOG_ALPHA[1])
-    lo = [_LOG_ALPHA[0]] + [b[0] for n in names for b in RADIAL[n].bounds]
-    hi = [top] + [b[1] for n in names for b in RADIAL[n].bounds]
-
-    def res(x):
-        return _residuals(x, data, geom, names, keep, s_max=s_max)
-
-    if start is None:
-        costs = [float(np.sum(res(np.array([t, *theta0]))[0] ** 2)) for t in _GRID]
-        log_alpha = float(_GRID[int(np.argmin(costs))])
-    else:
-        log_alpha = math.log(start.alpha)
-    x0 = np.clip(np.array([log_alpha, *theta0]), np.add(lo, 1e-9), np.subtract(hi, 1e-9))
-    sol = least_squares(lambda x: res(x)[0].ravel(), x0, bounds=(lo, hi), x_scale=1.0, method="trf")
-    r, s = res(sol.x)
+    at = _layout(tuple(names))
+    x0 = np.zeros(_layout(_ALL).size)
+    x0[at] = [0.0 if start is None else math.log(start.alpha)] + [
+        v for n in names for v in (before.get(n) or (0.0,) * len(RADIAL[n].params))
+    ]
+    free = np.zeros(x0.size, bool)
+    free[at] = True
+    a = _args(data, keep, bounded)
+    if start is None:  # log α from the best of a grid
+        x0[0] = _GRID[int(np.argmin([np.sum(_residuals(np.r_[t, x0[1:]], a, xp=np)[0] ** 2) for t in _GRID]))]
+    with jax.enable_x64(True):  # float64 for fitting, scoped (the user's setting is left alone)
+        padded = jax.tree.map(jnp.asarray, _args(data, keep, bounded, pad=True))
+        x = np.asarray(_solve(jnp.asarray(x0), jnp.asarray(free), padded))
+    r, s = _residuals(x, a, xp=np)
+    x, jac = x[at], _jacobian(x, at, a)
     chi2 = float(np.sum(r**2))
     w = data.w * keep[..., None]
     n_obs = int(np.sum(w > 0))
     n_rho = int(np.sum(w.sum(1) > 0))
-    dof = max(n_obs - n_rho - 2 - (len(sol.x) - 1), 1)
+    dof = max(n_obs - n_rho - 2 - (len(x) - 1), 1)
     try:
-        cov = np.linalg.inv(sol.jac.T @ sol.jac)
-        sd = np.sqrt(np.clip(np.diag(cov), 0, None))
+        sd = np.sqrt(np.clip(np.diag(np.linalg.inv(jac.T @ jac)), 0, None))
     except np.linalg.LinAlgError:
-        sd = np.full(len(sol.x), np.nan)
-    effects = {n: tuple(float(v) for v in t) for n, t in _split(sol.x, names).items()}
+        sd = np.full(len(x), np.nan)
+    effects = {n: tuple(float(v) for v in t) for n, t in _split(x, names).items()}
     sigma = {n: tuple(float(v) for v in t) for n, t in _split(sd, names).items()}
-    alpha = math.exp(float(sol.x[0]))
-    return SharedFit(chi2, dof, alpha, float(s), effects, sigma, alpha * float(sd[0]), sol.x)
+    alpha = math.exp(float(x[0]))
+    return SharedFit(chi2, dof, alpha, float(s), effects, sigma, alpha * float(sd[0]), x)
+
+
+def _residuals_at(data: PhotoData, fit: SharedFit, names: tuple[str, ...], keep: np.ndarray) -> np.ndarray:
+    x = np.zeros(_layout(_ALL).size)
+    x[_layout(tuple(names))] = fit.x
+    return _residuals(x, _args(data, keep), s=fit.rho_s, xp=np)[0]
 
 
 def chi2_held(data: PhotoData, fit: SharedFit, names: tuple[str, ...], keep: np.ndarray) -> float:
     """χ² of the views ``keep`` with ``fit``'s lobe and gains held, ρd profiled on them."""
-    r, _ = _residuals(fit.x, data, data.lobe_geometry, names, keep, s=fit.rho_s)
-    return float(np.sum(r**2))
+    return float(np.sum(_residuals_at(data, fit, names, keep) ** 2))
 
 
 def gains(data: PhotoData, effects: dict[str, tuple[float, ...]]) -> np.ndarray:
     """``(P, V)`` the product of the fitted radial gains (1 without any)."""
-    return _gain(data, {n: np.asarray(t) for n, t in effects.items()})
+    names = tuple(effects)
+    x = np.array([0.0, *(v for n in names for v in effects[n])])
+    return np.asarray(_gain(x[1:], names, data))
 
 
 def shared_residuals(data: PhotoData, fit: SharedFit, names: tuple[str, ...]) -> np.ndarray:
     """``(P, V, C)`` the weighted residuals ``√w (f − G (a + s L))`` of ``fit`` on every view (ρd profiled)."""
-    r, _ = _residuals(fit.x, data, data.lobe_geometry, names, np.ones(data.radius2.shape, bool), s=fit.rho_s)
-    return r
+    return _residuals_at(data, fit, names, np.ones(data.radius2.shape, bool))
 
 
 def shared_rho_d(data: PhotoData, fit: SharedFit, names: tuple[str, ...]) -> np.ndarray:
     """``(P, C)`` each problem's ρd under ``fit`` (``π a``, ``a`` the weighted mean of ``f/G − s L``; NaN unseen)."""
-    g = _gain(data, _split(fit.x, names))[..., None]
+    g = np.asarray(_gain(np.asarray(fit.x[1:]), tuple(names), data))[..., None]
     w = data.w * g * g
-    lobe = _lobe(data, data.lobe_geometry, float(fit.x[0]))[..., None]
+    u, v, n = data.lobe_geometry
+    a2 = math.exp(2.0 * float(fit.x[0]))
+    lobe = (n * np.exp(-(u + v) / a2) / a2)[..., None]
     sw = w.sum(1)
     with np.errstate(invalid="ignore", divide="ignore"):
         return np.where(sw > 0, np.pi * np.sum(w * (data.f / g - fit.rho_s * lobe), 1) / sw, np.nan)

@@ -78,6 +78,13 @@ def _where_dict(where: dict) -> dict:
     return out | {"map": "residual.png"}
 
 
+def _refused_dict(r: dict) -> dict:
+    return {
+        k: ({n: _num(x) for n, x in v.items()} if isinstance(v, dict) else _num(v) if isinstance(v, float) else v)
+        for k, v in r.items()
+    }
+
+
 def _pm(v, s) -> str:
     """``v ± s`` as the scanline report writes it (:func:`._report._fmt`); "–" for no value."""
     return "–" if v is None else _fmt(float(v), math.nan if s is None else float(s))
@@ -118,6 +125,10 @@ class PhotoDiscoveryReport:
         (``gap_bounded`` its gap so held; ``None`` where the lobes were per cluster and could not be held).
     where
         Where the final residual lives (:func:`wardjax.effects._photo_checks.residual_where`).
+    refused
+        ``{step, effect, why, gap_before, gap_after, delta_bic_held, params, stderr}``: radial effects that
+        passed their evidence and hold-out on the held structure but were not added, because the structure
+        refitted with them did not lower the gap.
     """
 
     name: str
@@ -141,6 +152,7 @@ class PhotoDiscoveryReport:
     not_identifiable: dict = dataclasses.field(default_factory=dict)
     unphysical: list = dataclasses.field(default_factory=list)
     where: dict | None = None
+    refused: list = dataclasses.field(default_factory=list)
 
     @property
     def not_told_apart(self) -> list:
@@ -206,6 +218,7 @@ class PhotoDiscoveryReport:
             "not_identifiable": dict(self.not_identifiable),
             "unphysical": [{k: _num(v) if isinstance(v, float) else v for k, v in u.items()} for u in self.unphysical],
             "residual": None if self.where is None else _where_dict(self.where),
+            "refused": [_refused_dict(r) for r in self.refused],
             "settings": self.settings,
             "seconds": _num(self.seconds),
         }
@@ -258,6 +271,15 @@ class PhotoDiscoveryReport:
                 for c in self.partial
                 if c.holdout is not None
             ]
+            L.append("")
+        if self.refused:
+            L.append("## Refused: no lower gap once the structure is refitted (not named)\n")
+            for r in self.refused:
+                params = ", ".join(f"{k} = {_pm(v, r['stderr'].get(k))}" for k, v in r["params"].items())
+                L.append(
+                    f"- step {r['step']}: {r['effect']} ({params}; ΔBIC {r['delta_bic_held']:.1f} on the held "
+                    f"structure): gap {r['gap_before']:.4g} → {r['gap_after']:.4g} refitted; {r['why']}."
+                )
             L.append("")
         if self.unphysical:
             L.append("## A lobe no material has\n")

@@ -1,6 +1,8 @@
 """Fitting Ward: scanlines (per-scanline fits, the joint refit, texture-field errors) and the pixels of a few photos."""
 
 from ._joint import CombinedFit as CombinedFit
+from ._pixel_heldphoto import HeldOutPhoto as HeldOutPhoto
+from ._pixel_heldphoto import heldout_pixels as heldout_pixels
 from ._pixels import PixelFit as PixelFit
 from ._pixels import PixelParams as PixelParams
 from ._pixels import fit_pixels as fit_pixels
@@ -24,6 +26,8 @@ __all__ = [
     "PixelParams",
     "fit_pixels",
     "predict_pixels",
+    "HeldOutPhoto",
+    "heldout_pixels",
     "placement_covariance",
     "plane_covariance",
 ]

@@ -35,6 +35,7 @@ Heights are in units of the pixel pitch (square pixels); rows run along
 
 from __future__ import annotations
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 from numpy import fft
@@ -51,6 +52,7 @@ MARGIN = 8  # pixels of margin on each axis, where the height wraps round
 _EPS = 1e-4  # the curvature term's weight, over the mean precision
 _RTOL = 1e-10
 _MAX_ITER = 5000
+_ROUNDS = 3  # projections onto the height field while the labels change there
 _DIRECT = 2500  # up to this many heights (the padded grid) the normal equations are solved directly
 
 
@@ -177,31 +179,57 @@ def _iterative(ops, wt, rhs, normal, shape, padded) -> np.ndarray:
     return height
 
 
+@jax.jit
+def relabel(theta, s, labels, geom, f, w):
+    """``(P,)`` each pixel's lobe at fixed normals: the one of lowest ``χ²_pl − 2 log π_l`` (ρd profiled,
+    ``π`` the current shares), the assignment step of the hard EM of :mod:`._pixel_clusters`."""
+    k, p = theta.shape[0], f.shape[0]
+    log_pi = jnp.log(jnp.maximum(jnp.bincount(labels, length=k) / p, 1e-300))
+    cost = jnp.stack([pm.pixel_chi2(theta, s, jnp.full(p, i, jnp.int32), geom, f, w) for i in range(k)], 1)
+    return jnp.argmin(cost - 2.0 * log_pi[None], 1).astype(jnp.int32)
+
+
 def on_height_field(theta, s, labels, normal_map, data, t, normalization, shape):
     """Each pixel's slopes refitted from where they are (its own optimum, not left flat) and projected onto
-    the nearest height field, weighted by their precision (:mod:`._pixel_height`); the lobes refitted there.
+    the nearest height field, weighted by their precision (:mod:`._pixel_height`); then each pixel's lobe
+    chosen again at its new normal (:func:`relabel`) and the lobes refitted there.
 
-    Returns ``theta``, ``s``, the normal map, the geometry, the ``(a, g)`` covariances of the pixels' own
-    fits (an upper bound on the projected slopes' uncertainty), and the χ² after and the slopes' RMS move.
+    A pixel whose photos see only the tails of its highlight may have taken the wrong lobe with a normal
+    bent to fit it; on the height field its normal comes from its neighbours, and its lobe is decided
+    there. While labels change (at most :data:`_ROUNDS` rounds) the slopes are refitted under the new
+    labels and projected again. Returns ``theta``, ``s``, ``labels``, the normal map, the geometry, the
+    ``(a, g)`` covariances of the pixels' own fits (an upper bound on the projected slopes' uncertainty),
+    and the χ² after, the slopes' RMS move and how many labels changed.
     """
     f, w, wi, wo = data
     c = f.shape[-1]
-    g, _, _, _, cov = fit_normals(
-        f, w, wi, wo, theta[labels], s[labels], t, normalization, -normal_map[:, :2] / normal_map[:, 2:], grid=False
-    )
-    cov_g = np.asarray(cov[:, c:, c:])
-    cov_g = np.where(np.all(np.isfinite(cov_g), (1, 2))[:, None, None], cov_g, 0.0)
-    g = np.asarray(g)
-    g_star, _ = integrable_slopes(g, np.linalg.pinv(cov_g), shape)
-    normal_map = normal_from_slopes(jnp.asarray(g_star))
-    geom = pm.geometry(wi, wo, normal_map, t, normalization)
-    theta, s, _ = pm.lobe_fit(theta, labels, geom, f, w, n_lobes=int(theta.shape[0]), steps=STEPS)
+    g_from = -normal_map[:, :2] / normal_map[:, 2:]
+    moved = relabelled = 0
+    for _ in range(_ROUNDS):
+        g, _, _, _, cov = fit_normals(f, w, wi, wo, theta[labels], s[labels], t, normalization, g_from, grid=False)
+        cov_g = np.asarray(cov[:, c:, c:])
+        cov_g = np.where(np.all(np.isfinite(cov_g), (1, 2))[:, None, None], cov_g, 0.0)
+        g = np.asarray(g)
+        g_star, _ = integrable_slopes(g, np.linalg.pinv(cov_g), shape)
+        moved = moved or float(np.sqrt(np.mean((g_star - g) ** 2)))
+        normal_map = normal_from_slopes(jnp.asarray(g_star))
+        geom = pm.geometry(wi, wo, normal_map, t, normalization)
+        theta, s, _ = pm.lobe_fit(theta, labels, geom, f, w, n_lobes=int(theta.shape[0]), steps=STEPS)
+        new = relabel(theta, s, labels, geom, f, w)
+        changed = int(jnp.sum(new != labels))
+        if not changed:
+            break
+        relabelled += changed
+        labels = new
+        theta, s, _ = pm.lobe_fit(theta, labels, geom, f, w, n_lobes=int(theta.shape[0]), steps=STEPS)
+        g_from = jnp.asarray(g_star)
     chi2 = float(jnp.sum(pm.pixel_chi2(theta, s, labels, geom, f, w)))
     return (
         theta,
         s,
+        labels,
         normal_map,
         geom,
         cov,
-        {"chi2": chi2, "slopes_moved_rms": float(np.sqrt(np.mean((g_star - g) ** 2)))},
+        {"chi2": chi2, "slopes_moved_rms": moved, "labels_changed": relabelled},
     )

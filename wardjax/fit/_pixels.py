@@ -557,7 +557,9 @@ def _fit(data, t, geom, n_obs: int, opts: _Options) -> PixelFit:
         }
         if opts.shape is not None:
             extra = (normalization, opts.shape)
-            theta, s, normal_map, geom, cov_ag, ev = on_height_field(theta, s, labels, normal_map, data, t, *extra)
+            theta, s, labels, normal_map, geom, cov_ag, ev = on_height_field(
+                theta, s, labels, normal_map, data, t, *extra
+            )
             evidence["normals"]["height_field"] = {"delta_chi2": before - ev.pop("chi2"), **ev}
     sample_lobes = (theta, s)
     if fast:
