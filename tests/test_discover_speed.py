@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import functools
 from collections import OrderedDict
 
 import numpy as np
@@ -132,78 +131,3 @@ def test_exported_program_is_read_back_without_tracing_and_gives_the_same_number
         monkeypatch.setattr(_exported, "_folder", lambda: None)
         plain = _exported.call("t", functools.partial(jitted, k=4), (("k", 4),), (x, tree))
         np.testing.assert_allclose(np.asarray(plain[1]), np.asarray(jitted(x, tree, k=4)[1]), rtol=0, atol=0)
-
-
-def test_stalling_lm_ends_a_settled_fit_unconverged_and_leaves_a_moving_one_alone():
-    """A parameter that lowers χ² less and less as it runs off keeps Levenberg–Marquardt's parameter rule from ever
-    being met: the plain solver runs to its cap. With the stall rule the fit ends once an accepted step gains less
-    than the stall in χ², at the χ² of the capped fit (within the stall), flagged unconverged; from a start that gains
-    little from its first step on (a lobe far from the data) it runs on. Rosenbrock's valley ends, also flagged,
-    within the stall of its minimum; with no stall it is solved as by the plain solver, to the same point."""
-    import jax
-    import jax.numpy as jnp
-    import optimistix as optx
-
-    from wardjax.effects._solve import _LINEAR_SOLVER, _StallingLM
-
-    def flat(z, _):  # the second parameter lowers χ² less and less as it runs off to large values
-        return jnp.array([z[0] - 1.0, 1e-3 * jnp.exp(-z[1])])
-
-    def valley(z, _):
-        return jnp.array([z[0] - 1.0, 10 * (z[1] - z[0] ** 2)])
-
-    @functools.partial(jax.jit, static_argnums=(0, 3))
-    def solve(fn, y0, stall, plain=False):
-        lm = (
-            optx.LevenbergMarquardt(1e-6, 1e-8, linear_solver=_LINEAR_SOLVER)
-            if plain
-            else _StallingLM(1e-6, 1e-8, stall, _LINEAR_SOLVER, jnp.sum(fn(y0, None) ** 2))
-        )
-        sol = optx.least_squares(fn, lm, y0, max_steps=60, throw=False)
-        chi2 = jnp.sum(fn(sol.value, None) ** 2)
-        return chi2, sol.stats["num_steps"], sol.result == optx.RESULTS.successful, sol.value
-
-    with jax.enable_x64(True):
-        y0 = jnp.array([3.0, 0.0])
-        c_cap, n_cap, ok_cap, _ = solve(flat, y0, 0.0)
-        c_st, n_st, ok_st, _ = solve(flat, y0, 1e-3)
-        assert int(n_cap) == 60 and not bool(ok_cap)
-        assert int(n_st) < 60 and not bool(ok_st)
-        assert float(c_st) - float(c_cap) < 1e-3
-        _, n_far, _, _ = solve(flat, jnp.array([1.0, 0.0]), 1e-3)  # gains little from its start: not settled
-        assert int(n_far) == 60
-        (c0, n0, ok0, z0), (c1, n1, ok1, _) = (solve(valley, jnp.array([-1.2, 1.0]), s) for s in (0.0, 1e-3))
-        assert bool(ok0) and float(c0) < 1e-20 and np.allclose(np.asarray(z0), 1.0)
-        assert not bool(ok1) and int(n1) < int(n0) and float(c1) - float(c0) < 1e-3
-        _, n_plain, _, z_plain = solve(valley, jnp.array([-1.2, 1.0]), 0.0, True)  # no stall: plain LM, step for step
-        assert int(n_plain) == int(n0)
-        np.testing.assert_array_equal(np.asarray(z0), np.asarray(z_plain))
-
-
-def test_gauss_newton_decrease_is_what_a_quadratic_still_has_to_lose(rng):
-    """On a linear least squares with a prior, χ² less the predicted decrease at any point is the minimum χ² (the
-    normal equations' solution, by NumPy); at the minimum the decrease is zero; a padded slot changes nothing."""
-    import jax
-
-    from wardjax.effects._solve import _gn_decrease
-
-    a, y = rng.normal(size=(30, 3)), rng.normal(size=30)
-    pw, z0 = np.array([0.0, 0.5, 2.0]), rng.normal(size=3)
-    A, b = np.vstack([a, np.diag(pw)]), np.concatenate([y, pw * z0])
-    z_min = np.linalg.lstsq(A, b, rcond=None)[0]
-
-    def chi2(z):
-        return float(np.sum((A @ z - b) ** 2))
-
-    with jax.enable_x64(True):
-        for z in (rng.normal(size=3), z_min):
-            r = a @ z - y
-            got = float(_gn_decrease(a, r, pw, z - z0, np.ones(3, bool)))
-            np.testing.assert_allclose(chi2(z) - got, chi2(z_min), rtol=1e-9, atol=1e-9)
-        z = rng.normal(size=3)
-        pad = float(
-            _gn_decrease(
-                np.c_[a, 0 * a[:, :1]], a @ z - y, np.r_[pw, 0.0], np.r_[z - z0, 0.0], np.r_[True, True, True, False]
-            )
-        )
-        np.testing.assert_allclose(pad, chi2(z) - chi2(z_min), rtol=1e-9)

@@ -105,20 +105,13 @@ def _score_candidate(search: _Search, cur: FitState, structure_p_of: Callable[[s
 def _continue_contenders(search: _Search, cur: FitState, remaining: list, fits: dict, scored: dict, score):
     """Continue the fits that stopped at the step cap where they decide the step, and rescore them in place.
 
-    These are the winner's and those of runners-up whose ΔBIC could reach
-    ``_REFINE_BIC`` of the winner's: while unconverged (at the step cap, or
-    settled in the ranking, :meth:`_Search.rank`) a ΔBIC is a lower bound, and
-    its reach adds the Gauss–Newton decrease the fit still predicts
-    (:meth:`_Search.reach`). The ranking among them, and the reported
-    parameters, need converged fits. Repeats until no such unconverged fit is
-    left unrefined, since a continued fit can change which candidate leads.
+    These are the winner's and those of runners-up whose ΔBIC (a lower bound
+    while unconverged) already reaches ``_REFINE_BIC`` of the winner's: the
+    ranking among them, and the reported parameters, need converged fits.
+    Repeats until no such unconverged fit is left unrefined, since a
+    continued fit can change which candidate leads.
     """
     refined: set = set()
-
-    def reach(i) -> float:  # the ΔBIC the fit could still reach
-        c = scored[i][0]
-        return c.delta_bic + max(c.state.chi2 - search.reach(fits[i][scored[i][1]]), 0.0)
-
     while True:
         top = max(scored[i][0].delta_bic for i in remaining)
         todo = [
@@ -127,7 +120,7 @@ def _continue_contenders(search: _Search, cur: FitState, remaining: list, fits: 
             if i not in refined
             and scored[i][1] is not None
             and not scored[i][0].state.ok
-            and (scored[i][0].delta_bic == top or reach(i) >= _REFINE_BIC * top > 0)
+            and (scored[i][0].delta_bic == top or scored[i][0].delta_bic >= _REFINE_BIC * top > 0)
         ]
         if not todo:
             break
@@ -176,7 +169,7 @@ def _rank_candidates(search: _Search, cur: _View, remaining: list[int]):
             structure_p[name] = _binned_test(r_flat, _flat(cur.covs[name], mask))[2]
         return structure_p[name]
 
-    res = search.rank(jobs)  # a settled fit ends there, flagged unconverged: deciders are continued below
+    res = search.fit(jobs)
     score = functools.partial(_score_candidate, search, cur.state, structure_p_of)
     keys = list(dict.fromkeys(owner))  # (effect, form)
     fits = {key: [r for r, o in zip(res, owner) if o == key and np.isfinite(r[1])] for key in keys}

@@ -124,9 +124,8 @@ class Candidate:
         ``None`` otherwise.
     converged
         Its fit converged. ``False`` when Levenberg–Marquardt stopped at its
-        step cap, or where its χ² settled while the candidates were ranked:
-        Δχ² and ΔBIC are then lower bounds. ``discover`` continues such a fit
-        when it would win or could reach half the winner's ΔBIC.
+        step cap: Δχ² and ΔBIC are then lower bounds. ``discover`` continues
+        such a fit when it would win or reaches half the winner's ΔBIC.
     """
 
     effect: str
@@ -413,9 +412,8 @@ class DiscoveryReport:
                 )
             if not all(c.converged for c in s.candidates):
                 L.append(
-                    "\n≥: the fit stopped at the Levenberg–Marquardt step cap (`lm_steps`) or where its χ² settled; "
-                    "Δχ² and ΔBIC are lower bounds that could not reach half the winner's ΔBIC, so the fit was not "
-                    "continued."
+                    "\n≥: the fit stopped at the Levenberg–Marquardt step cap (`lm_steps`); Δχ² and ΔBIC are "
+                    "lower bounds, below half the winner's ΔBIC, so the fit was not continued."
                 )
             if s.effect in figures:
                 what = covariate_label(s.plot["covariate"]) if s.plot else ""

@@ -22,7 +22,7 @@ from ._holdout import Holdout
 from ._recheck import VariogramRecheck
 from ._remeasure import TextureRemeasure
 from ._report import FitState
-from ._solve import RANK_TOL, TOL, _cov_full, _fit_batch, _Layout, _residual_view, static_key
+from ._solve import _cov_full, _fit_batch, _Layout, _residual_view, static_key
 from ._texture_term import CrossTexture
 
 _SOLO_MIN_OBS = 20_000  # from this many residuals on, each fit is solved alone (_fit_batch)
@@ -77,9 +77,8 @@ class _Search:
         out.solo = self.solo
         return out
 
-    def fit(self, jobs, tol=TOL):
-        """Solve ``jobs`` (see :func:`_fit_batch`) at the run's padded width, batch width and step cap (``tol``:
-        the stopping rule; the default, :data:`~wardjax.effects._solve.TOL`, is plain convergence)."""
+    def fit(self, jobs):
+        """Solve ``jobs`` (see :func:`_fit_batch`) at the run's padded width, batch width and step cap."""
         return _fit_batch(
             jobs,
             self.layout,
@@ -91,20 +90,7 @@ class _Search:
             self.lm_steps,
             self.chunk,
             self.solo,
-            tol,
         )
-
-    def rank(self, jobs):
-        """Solve a step's candidate ``jobs`` for ranking: as :meth:`fit`, but a fit whose χ² has settled ends there,
-        flagged unconverged (:data:`~wardjax.effects._solve.RANK_TOL`). Where such a fit decides, it is continued
-        to convergence (:meth:`refine`, :meth:`reach`); elsewhere its Δχ² is a lower bound, as a capped fit's."""
-        return self.fit(jobs, RANK_TOL)
-
-    @staticmethod
-    def reach(r) -> float:
-        """The χ² an unconverged fit ``r`` could still reach: its χ² less the Gauss–Newton predicted decrease
-        (its own χ² for a converged fit). A fit whose reach cannot decide need not be continued."""
-        return r[1] if r[3] else r[1] - r[7]
 
     def refine(self, r, active=()):
         """Continue a fit that stopped at the step cap from where it stopped, up to ``_REFINE_ROUNDS`` times.
@@ -117,7 +103,7 @@ class _Search:
         """
         last = math.inf
         for _ in range(_REFINE_ROUNDS):
-            u, chi2, _, ok, idx, km, anchor = r[:7]
+            u, chi2, _, ok, idx, km, anchor = r
             # a round that lowered nothing has stalled (a parameter pinned where its gradient vanishes): the next,
             # from the same point, would repeat it exactly
             if ok or not np.isfinite(chi2) or chi2 >= last:
@@ -134,7 +120,7 @@ class _Search:
         The degrees of freedom count the free parameters, the profiled ones
         and the active effects' data-dependent ones.
         """
-        u, chi2, jtj, ok, idx, km = r[:6]
+        u, chi2, jtj, ok, idx, km, _ = r
         n_par = int(km.sum()) + self.n_prof + sum(self.testable[i].n_data_params for i in active)
         dof = max(self.n_obs - n_par, 1)
         cov = _cov_full(self.layout, jtj, idx, km)

@@ -11,9 +11,7 @@ from __future__ import annotations
 
 import functools
 import math
-from typing import Any
 
-import equinox as eqx
 import jax
 import jax.numpy as jnp
 import lineax as lx
@@ -24,50 +22,9 @@ from . import _exported
 from ._effect import Effect, Param
 
 _LINEAR_SOLVER = lx.QR()
-# Levenberg–Marquardt's stopping rule: relative and absolute tolerances on every parameter and every residual, and
-# the stall in χ² (0: none; see _StallingLM). Passed to the compiled program as data: one program serves both rules.
-TOL = (1e-6, 1e-8, 0.0)  # converged: what every fit that is reported or decides ends with
-RANK_TOL = (1e-6, 1e-8, 1e-3)  # ranking a step's candidates: a settled fit ends there, flagged unconverged
-_STALL_SHARE = 1e-3  # ... and gaining less than this share of what it has gained since its start
-
-
-class _StallingLM(optx.LevenbergMarquardt):
-    """Levenberg–Marquardt that also stops, *unconverged*, once an accepted step lowers χ² by less than ``stall``.
-
-    The stopping rule of :class:`optimistix.LevenbergMarquardt` asks every
-    parameter and every whitened residual to move by less than ``atol + rtol·|value|``.
-    A fit whose χ² has settled can still fail it for its whole step cap: a
-    parameter the data do not pin wanders along a flat direction (a Fresnel
-    κ running to large values, a second lobe's ratio while its weight is
-    zero, anisotropy's angle at η ≈ 0), moving the parameters but not χ².
-    Most candidates of a step did (10 of 15 on a textured 320 × 240 capture,
-    20 steps each, χ² equal across their starts to 10⁻²). With ``stall > 0``
-    such a fit ends at the first accepted step that gains less than ``stall``
-    in χ², and less than ``_STALL_SHARE`` of what it has gained since its start
-    (``chi2_start``: a start in a flat region, a lobe far from the data, gains
-    little at first and must not stop there), and is flagged unconverged, as
-    one that hit the cap is. Only the ranking of a step's candidates uses it
-    (:data:`RANK_TOL`); a fit that decides is continued from there at
-    ``stall = 0`` (:data:`TOL`), which is plain Levenberg–Marquardt.
-    """
-
-    stall: Any
-    chi2_start: Any
-
-    def __init__(self, rtol, atol, stall, linear_solver, chi2_start: Any = jnp.inf):
-        super().__init__(rtol=rtol, atol=atol, linear_solver=linear_solver)
-        self.stall, self.chi2_start = stall, chi2_start
-
-    def step(self, fn, y, args, options, state, tags):
-        y_new, new, aux = super().step(fn, y, args, options, state, tags)
-        accepted = (new.num_accepted_steps > state.num_accepted_steps) & ~state.first_step
-        chi2 = jnp.sum(new.f_info.residual**2)  # with the priors' terms, as the solver sees it
-        gain = jnp.sum(state.f_info.residual**2) - chi2
-        settled = (gain < self.stall) & (gain < _STALL_SHARE * (self.chi2_start - chi2))
-        stall = accepted & settled & ~new.terminate
-        result = optx.RESULTS.where(stall, optx.RESULTS.nonlinear_max_steps_reached, new.result)
-        new = eqx.tree_at(lambda s: (s.terminate, s.result), new, (new.terminate | stall, result))
-        return y_new, new, aux
+# Levenberg–Marquardt's stopping rule (relative, absolute) on every parameter and every residual; passed to the
+# compiled program as data, so another rule would not trace a new program
+TOL = (1e-6, 1e-8)
 
 
 class _Layout:
@@ -145,8 +102,8 @@ def _solve_batch(u0, a0, idx, kmask, active, prior_w, tol, data, *, model, effec
         def resid(z, _):
             return jnp.concatenate([data_resid(z), pw * (z - z0)])
 
-        # the tolerances are data (``tol``: rtol, atol, stall), so that one compiled program serves both rules
-        solver = _StallingLM(tol[0], tol[1], tol[2], _LINEAR_SOLVER, jnp.sum(resid(u0[idx], None) ** 2))
+        # the tolerances are data (``tol``: rtol, atol): another rule would not trace a new program
+        solver = optx.LevenbergMarquardt(rtol=tol[0], atol=tol[1], linear_solver=_LINEAR_SOLVER)
         sol = optx.least_squares(resid, solver, u0[idx], max_steps=max_steps, throw=False)
         z = sol.value
         r = data_resid(z)
@@ -155,30 +112,13 @@ def _solve_batch(u0, a0, idx, kmask, active, prior_w, tol, data, *, model, effec
         jtj = jac.T @ jac
         ok = (sol.result == optx.RESULTS.successful) & jnp.isfinite(chi2)
         u = u0.at[idx].set(jnp.where(kmask, z, u0[idx]))
-        return u, chi2, jtj, ok, sol.stats["num_steps"], _gn_decrease(jac, r, pw, z - z0, kmask)
+        return u, chi2, jtj, ok, sol.stats["num_steps"]
 
     if u0.shape[0] == 1:
         # one fit (solo mode): not vmapped, so the effects' flags stay unbatched and each inactive effect's
         # ``lax.cond`` skips it (under vmap a batched flag evaluates both branches)
         return jax.tree_util.tree_map(lambda a: a[None], one(u0[0], a0[0], idx[0], kmask[0], active[0]))
     return jax.vmap(one)(u0, a0, idx, kmask, active)
-
-
-def _gn_decrease(jac, r, pw, dz, kmask):
-    """The decrease of χ² that one Gauss–Newton step from here predicts: ``gᵀ H⁻¹ g`` (≥ 0).
-
-    ``g = Jᵀ r + P (z − z₀)`` and ``H = JᵀJ + P`` of the data's residuals ``r`` (Jacobian ``J``) and the priors'
-    (weights² ``P``); a padded slot (``kmask`` false) is fixed. Near a minimum χ² is quadratic, so
-    ``χ² − gᵀ H⁻¹ g`` is where the fit could still reach: what a settled fit could yet gain. ``H`` gets a ridge
-    of ``10⁻¹⁰`` of its largest diagonal, so that a direction the data do not pin (where ``g`` vanishes too) does
-    not make it singular; the solve is the LM program's own QR (no other LAPACK call enters the exported program).
-    """
-    p2 = pw * pw
-    g = jnp.where(kmask, jac.T @ r + p2 * dz, 0.0)
-    h = jac.T @ jac + jnp.diag(jnp.where(kmask, p2, 1.0))
-    h = h + 1e-10 * jnp.max(jnp.diag(h)) * jnp.eye(h.shape[0])
-    step = lx.linear_solve(lx.MatrixLinearOperator(h), g, _LINEAR_SOLVER, throw=False).value
-    return jnp.maximum(g @ step, 0.0)
 
 
 @functools.partial(jax.jit, static_argnames=("model", "effects", "layout_key"))
@@ -214,7 +154,7 @@ def _job_rows(jobs, layout, n_e, width):
     return rows
 
 
-def _solve_rows(rows, layout, model, effects, data, max_steps, tol):
+def _solve_rows(rows, layout, model, effects, data, max_steps):
     """One ``_solve_batch`` call on stacked rows, dispatched: device arrays back, not yet waited for.
 
     JAX dispatches asynchronously, so a caller that dispatches several calls
@@ -224,10 +164,10 @@ def _solve_rows(rows, layout, model, effects, data, max_steps, tol):
     U0, A0, IDX, KM, A = (np.stack(col) for col in zip(*rows))
     static = dict(model=model, effects=effects, layout_key=layout.key, max_steps=max_steps)
     with jax.enable_x64(True):
-        args = tuple(jnp.asarray(x) for x in (U0, A0, IDX, KM, A, layout.prior_w, np.asarray(tol, float))) + (data,)
+        args = tuple(jnp.asarray(x) for x in (U0, A0, IDX, KM, A, layout.prior_w, np.asarray(TOL, float))) + (data,)
         fn = functools.partial(_solve_batch, **static)
-        u, chi2, jtj, ok, _, gain = _exported.call("lm", fn, static_key(static), args)
-    return u, chi2, jtj, ok, gain
+        u, chi2, jtj, ok, _ = _exported.call("lm", fn, static_key(static), args)
+    return u, chi2, jtj, ok
 
 
 def static_key(static: dict) -> tuple:
@@ -241,12 +181,8 @@ def static_key(static: dict) -> tuple:
     return tuple(out)
 
 
-def _fit_batch(jobs, layout, model, effects, data, k_pad, b_pad, max_steps, chunk, solo=False, tol=TOL):
-    """Solve a list of jobs ``(u0, free indices, active effect indices)``; one result per job, in order:
-    ``(u, χ², JᵀJ, converged, free slots, their mask, prior centres, Gauss–Newton predicted decrease)``.
-
-    ``tol`` is the stopping rule (:data:`TOL`: converged; :data:`RANK_TOL`: a settled fit also stops, flagged
-    unconverged).
+def _fit_batch(jobs, layout, model, effects, data, k_pad, b_pad, max_steps, chunk, solo=False):
+    """Solve a list of jobs ``(u0, free indices, active effect indices)``; one result per job, in order.
 
     Batched (``solo=False``): chunks of ``min(b_pad, chunk)`` jobs, each padded
     to ``k_pad`` free slots, so that every call has one shape and one compiled
@@ -274,13 +210,12 @@ def _fit_batch(jobs, layout, model, effects, data, k_pad, b_pad, max_steps, chun
     for c0 in range(0, len(rows), chunk):  # every call dispatched before any is read: they may run side by side
         part = rows[c0 : c0 + chunk]
         pad = part + [part[0]] * (width - len(part)) if len(part) < width else part
-        calls.append((part, _solve_rows(pad, layout, model, effects, data, max_steps, tol)))
+        calls.append((part, _solve_rows(pad, layout, model, effects, data, max_steps)))
     out = []
     for part, dev in calls:
-        u, chi2, jtj, ok, gain = (np.asarray(x) for x in dev)
+        u, chi2, jtj, ok = (np.asarray(x) for x in dev)
         for i in range(len(part)):
-            row = (u[i], float(chi2[i]), jtj[i], bool(ok[i]), part[i][2], part[i][3], part[i][1], float(gain[i]))
-            out.append(row)
+            out.append((u[i], float(chi2[i]), jtj[i], bool(ok[i]), part[i][2], part[i][3], part[i][1]))
     return out
 
 
