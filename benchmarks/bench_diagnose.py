@@ -11,7 +11,9 @@ cache folder (``wardjax --cache-dir``, :func:`wardjax.run._cache.enable_compile_
 For each run it prints the wall time, the CPU time of the subprocess (user +
 system: what the run cost, less sensitive than the wall time to other
 processes on a shared machine) and the 1-minute load average before and
-after, what diagnose found (effects named, gap before → after), and the ratio
+after, what diagnose found (effects named, gap before → after), each stage's
+line of ``diagnose --progress`` (its wall time and the part spent compiling; kept
+in the JSON as ``stages``), and the ratio
 to the figures measured with this benchmark on the code before the speed work
 (:data:`BEFORE`, recorded with its commit and date: the old code cannot be
 run from this tree). The issue's target (13, item 5): ≤ 15 s warm, ≤ 30 s cold
@@ -22,7 +24,8 @@ on the 2-core machine.
 textured captures the benchmark also times ``diagnose --no-texture`` (20,000
 pixels, the path :data:`BEFORE` measured) beside it.
 
-Run alone: ``python -m benchmarks.bench_diagnose [--size 320 240] [--textures wood none] [--json out.json]``.
+Run alone: ``python -m benchmarks.bench_diagnose [--size 320 240] [--textures wood none] [--terms on off]
+[--json out.json]`` (``--terms on``: only the default, texture-carrying run).
 """
 
 from __future__ import annotations
@@ -69,6 +72,11 @@ def _run(args: list[str]) -> tuple[float, float, float, float, subprocess.Comple
     return wall, cpu, load0, os.getloadavg()[0], proc
 
 
+def _stages(stderr: str) -> list[str]:
+    """The stage lines ``diagnose --progress`` printed (``✓ name (s, of which compiling s)``), in order."""
+    return [ln[2:].strip() for ln in stderr.splitlines() if ln.startswith("✓ ")]
+
+
 def _found(report_dir: Path) -> str:
     rep = json.loads((report_dir / "report.json").read_text())
     names = ", ".join(rep["found"]) or "nothing"
@@ -90,6 +98,7 @@ def main(argv=None) -> dict:
     ap = argparse.ArgumentParser(prog="python -m benchmarks.bench_diagnose")
     ap.add_argument("--size", type=int, nargs=2, default=(320, 240), metavar=("W", "H"))
     ap.add_argument("--textures", nargs="+", default=["wood", "none"], choices=["wood", "marble", "none"])
+    ap.add_argument("--terms", nargs="+", default=["on", "off"], choices=["on", "off"], help="texture term runs")
     ap.add_argument("--json", default=None, help="write the figures here")
     a = ap.parse_args(argv)
     size = [str(v) for v in a.size]
@@ -104,13 +113,13 @@ def main(argv=None) -> dict:
         for tex in a.textures:
             cap = root / f"capture_{tex}"
             _run(["simulate", str(cap), "--texture", tex, "--size", *size])
-            terms = (True, False) if tex != "none" else (True,)  # the default, then --no-texture
+            terms = tuple(t == "on" for t in a.terms) if tex != "none" else (True,)  # the default, then --no-texture
             for term, state in [(t, s) for t in terms for s in ("cold", "warm")]:
                 cache = root / f"cache_{tex}_{term}"  # empty: the first diagnose compiles everything
                 out = root / f"report_{tex}_{term}_{state}"
                 extra = [] if term else ["--no-texture"]
-                wall, cpu, l0, l1, _ = _run(
-                    ["--cache-dir", str(cache), "diagnose", str(cap), "--out", str(out), *extra]
+                wall, cpu, l0, l1, proc = _run(
+                    ["--cache-dir", str(cache), "diagnose", str(cap), "--out", str(out), "--progress", *extra]
                 )
                 before = BEFORE["runs"].get((tex, state)) if tuple(a.size) == (320, 240) else None
                 ratio = f"{before[0] / wall:5.2f}×" if before else "     —"
@@ -125,6 +134,7 @@ def main(argv=None) -> dict:
                     "before_wall_s": before[0] if before else None,
                     "before_cpu_s": before[1] if before else None,
                     "found": _found(out),
+                    "stages": _stages(proc.stderr),
                 }
                 rows.append(row)
                 b_wall, b_cpu = (before[0], before[1]) if before else (float("nan"), float("nan"))
@@ -133,6 +143,8 @@ def main(argv=None) -> dict:
                     f"{b_wall:9.1f} {ratio} {b_cpu:10.1f}  {row['found']}",
                     flush=True,
                 )
+                for line in row["stages"]:
+                    print(f"    {line}", flush=True)
     for term in sorted({r["texture_term"] for r in rows}):
         for state, lim in TARGET.items():
             worst = max(r["wall_s"] for r in rows if r["cache"] == state and r["texture_term"] == term)

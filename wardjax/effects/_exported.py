@@ -18,7 +18,13 @@ How
     the solver libraries traced into it (equinox, lineax, optimistix) and the wardjax source itself (every
     ``.py`` file of the package), so that a changed library never reads a stale program. Without a compile
     cache folder (a library call, the tests) nothing is written and the function is
-    called as it is, as is a program that cannot be exported (one with host callbacks). Custom calls whose
+    called as it is, as is a program that cannot be exported (one with host callbacks).
+
+    The folder holds one build's programs: a file's name starts with the program's name and a digest of the
+    build (the libraries' versions and the wardjax source), and writing a program removes the files of every other
+    build, which no process of this build reads again. So the folder stays as large as one build's programs (a
+    few, ~1 MB each) however often the source changes. In a process the loaded programs are kept, the most
+    recently used ``_MAX_LOADED`` of them. Custom calls whose
     compatibility across JAX versions is not guaranteed (LAPACK's QR) are allowed: a file is only read by the JAX
     version that wrote it.
 """
@@ -28,6 +34,7 @@ from __future__ import annotations
 import functools
 import hashlib
 import importlib.metadata
+from collections import OrderedDict
 from collections.abc import Callable
 from pathlib import Path
 
@@ -48,7 +55,8 @@ _CUSTOM_CALLS = (
 )
 # the libraries whose Python code is traced into the programs (their versions enter each file's name)
 _TRACED_WITH = ("jax", "jaxlib", "equinox", "lineax", "optimistix")
-_LOADED: dict[str, Callable] = {}  # digest → the jitted call of its exported program, for this process
+_MAX_LOADED = 32  # programs kept loaded in a process (a discovery run uses two or three)
+_LOADED: OrderedDict[str, Callable] = OrderedDict()  # digest → the jitted call of its program, most recent last
 
 
 @functools.cache
@@ -74,6 +82,12 @@ def _folder() -> Path | None:
     return Path(d) / "exported" if d else None
 
 
+@functools.cache
+def _build() -> str:
+    """What names this build's programs apart from another's: the traced libraries' versions and the source."""
+    return hashlib.sha256(repr((_versions(), _source_digest())).encode()).hexdigest()[:12]
+
+
 def _digest(name: str, static: tuple, treedef, leaves) -> str:
     avals = [(tuple(x.shape), str(x.dtype), bool(getattr(x, "weak_type", False))) for x in leaves]
     parts = (
@@ -84,16 +98,36 @@ def _digest(name: str, static: tuple, treedef, leaves) -> str:
         getattr(jax.config, "jax_enable_x64", False),
         jax.default_backend(),
     )
-    return hashlib.sha256(repr((parts, _versions(), _source_digest())).encode()).hexdigest()[:40]
+    return hashlib.sha256(repr((parts, _build())).encode()).hexdigest()[:40]
 
 
 def _write(path: Path, blob: bytes | bytearray) -> None:
-    """Write atomically (a concurrent process reads the whole file or none); a failure only skips the write."""
+    """Write atomically (a concurrent process reads the whole file or none), then remove other builds' programs
+    (:func:`_prune`); a failure only skips the write, or what is left of the pruning."""
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
         write_bytes_atomic(path, blob)
+        _prune(path.parent)
     except OSError:
         pass
+
+
+def _prune(folder: Path) -> None:
+    """Remove the program files of every build but this one (``NAME-BUILD-KEY.bin``, :func:`_build`; a name
+    without a build is an older layout's, of another build too)."""
+    for old in folder.glob("*.bin"):
+        parts = old.stem.rsplit("-", 2)
+        if len(parts) < 3 or parts[1] != _build():
+            old.unlink(missing_ok=True)  # a concurrent process may have removed it
+
+
+def _remember(key: str, run: Callable) -> Callable:
+    """Keep ``run`` as the loaded program of ``key``, dropping the least recently used past ``_MAX_LOADED``."""
+    _LOADED[key] = run
+    _LOADED.move_to_end(key)
+    while len(_LOADED) > _MAX_LOADED:
+        _LOADED.popitem(last=False)
+    return run
 
 
 def _load(path: Path) -> Callable | None:
@@ -115,22 +149,23 @@ def call(name: str, fn: Callable, static: tuple, args: tuple):
     leaves, treedef = jax.tree_util.tree_flatten(args)
     key = _digest(name, static, treedef, leaves)
     run = _LOADED.get(key)
+    if run is not None:
+        _LOADED.move_to_end(key)
+        return run(*leaves)
+    path = folder / f"{name}-{_build()}-{key}.bin"
+    run = _load(path) if path.exists() else None
     if run is None:
-        path = folder / f"{name}-{key}.bin"
-        run = _load(path) if path.exists() else None
-        if run is None:
 
-            def flat(*xs):
-                return fn(*jax.tree_util.tree_unflatten(treedef, xs))
+        def flat(*xs):
+            return fn(*jax.tree_util.tree_unflatten(treedef, xs))
 
-            checks = [export.DisabledSafetyCheck.custom_call(t) for t in _CUSTOM_CALLS]
-            try:
-                exp = export.export(jax.jit(flat), disabled_checks=checks)(*leaves)
-                blob = exp.serialize()
-            except (NotImplementedError, ValueError):  # host callbacks, another custom call: run it as it is
-                _LOADED[key] = flat
-                return fn(*args)
-            _write(path, blob)
-            run = jax.jit(exp.call)
-        _LOADED[key] = run
-    return run(*leaves)
+        checks = [export.DisabledSafetyCheck.custom_call(t) for t in _CUSTOM_CALLS]
+        try:
+            exp = export.export(jax.jit(flat), disabled_checks=checks)(*leaves)
+            blob = exp.serialize()
+        except (NotImplementedError, ValueError):  # host callbacks, another custom call: run it as it is
+            _remember(key, flat)
+            return fn(*args)
+        _write(path, blob)
+        run = jax.jit(exp.call)
+    return _remember(key, run)(*leaves)

@@ -22,7 +22,7 @@ from ._holdout import Holdout
 from ._recheck import VariogramRecheck
 from ._remeasure import TextureRemeasure
 from ._report import FitState
-from ._solve import TOL, _cov_full, _fit_batch, _Layout, _residual_view, static_key
+from ._solve import _cov_full, _fit_batch, _Layout, _residual_view, static_key
 from ._texture_term import CrossTexture
 
 _SOLO_MIN_OBS = 20_000  # from this many residuals on, each fit is solved alone (_fit_batch)
@@ -77,9 +77,8 @@ class _Search:
         out.solo = self.solo
         return out
 
-    def fit(self, jobs, tol=TOL):
-        """Solve ``jobs`` (see :func:`_fit_batch`) at the run's padded width, batch width and step cap (``tol``:
-        the stopping rule's relative and absolute tolerances)."""
+    def fit(self, jobs):
+        """Solve ``jobs`` (see :func:`_fit_batch`) at the run's padded width, batch width and step cap."""
         return _fit_batch(
             jobs,
             self.layout,
@@ -91,7 +90,6 @@ class _Search:
             self.lm_steps,
             self.chunk,
             self.solo,
-            tol,
         )
 
     def refine(self, r, active=()):

@@ -102,7 +102,7 @@ def _solve_batch(u0, a0, idx, kmask, active, prior_w, tol, data, *, model, effec
         def resid(z, _):
             return jnp.concatenate([data_resid(z), pw * (z - z0)])
 
-        # the tolerances are data (``tol``: rtol, atol), so that one compiled program serves both rules
+        # the tolerances are data (``tol``: rtol, atol): another rule would not trace a new program
         solver = optx.LevenbergMarquardt(rtol=tol[0], atol=tol[1], linear_solver=_LINEAR_SOLVER)
         sol = optx.least_squares(resid, solver, u0[idx], max_steps=max_steps, throw=False)
         z = sol.value
@@ -154,7 +154,7 @@ def _job_rows(jobs, layout, n_e, width):
     return rows
 
 
-def _solve_rows(rows, layout, model, effects, data, max_steps, tol=TOL):
+def _solve_rows(rows, layout, model, effects, data, max_steps):
     """One ``_solve_batch`` call on stacked rows, dispatched: device arrays back, not yet waited for.
 
     JAX dispatches asynchronously, so a caller that dispatches several calls
@@ -164,7 +164,7 @@ def _solve_rows(rows, layout, model, effects, data, max_steps, tol=TOL):
     U0, A0, IDX, KM, A = (np.stack(col) for col in zip(*rows))
     static = dict(model=model, effects=effects, layout_key=layout.key, max_steps=max_steps)
     with jax.enable_x64(True):
-        args = tuple(jnp.asarray(x) for x in (U0, A0, IDX, KM, A, layout.prior_w, np.asarray(tol, float))) + (data,)
+        args = tuple(jnp.asarray(x) for x in (U0, A0, IDX, KM, A, layout.prior_w, np.asarray(TOL, float))) + (data,)
         fn = functools.partial(_solve_batch, **static)
         u, chi2, jtj, ok, _ = _exported.call("lm", fn, static_key(static), args)
     return u, chi2, jtj, ok
@@ -181,7 +181,7 @@ def static_key(static: dict) -> tuple:
     return tuple(out)
 
 
-def _fit_batch(jobs, layout, model, effects, data, k_pad, b_pad, max_steps, chunk, solo=False, tol=TOL):
+def _fit_batch(jobs, layout, model, effects, data, k_pad, b_pad, max_steps, chunk, solo=False):
     """Solve a list of jobs ``(u0, free indices, active effect indices)``; one result per job, in order.
 
     Batched (``solo=False``): chunks of ``min(b_pad, chunk)`` jobs, each padded
@@ -210,7 +210,7 @@ def _fit_batch(jobs, layout, model, effects, data, k_pad, b_pad, max_steps, chun
     for c0 in range(0, len(rows), chunk):  # every call dispatched before any is read: they may run side by side
         part = rows[c0 : c0 + chunk]
         pad = part + [part[0]] * (width - len(part)) if len(part) < width else part
-        calls.append((part, _solve_rows(pad, layout, model, effects, data, max_steps, tol)))
+        calls.append((part, _solve_rows(pad, layout, model, effects, data, max_steps)))
     out = []
     for part, dev in calls:
         u, chi2, jtj, ok = (np.asarray(x) for x in dev)
