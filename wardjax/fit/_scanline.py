@@ -317,22 +317,7 @@ def fit_scanlines(
     sandwich = weights is None and errors != "gauss_newton" and solver == "fast"
     sol = _solve(data, dtype=dtype, chunk=chunk, check=check, sandwich=sandwich, steps=_steps(max_steps), **kw)
     if dtype == np.float32 and solver == "fast":
-        # A float32 fit that is not certified (rounding can cancel the
-        # algebraic centring into a spurious optimum: ~3 in 10⁴ scanlines with
-        # broad lobes) is fitted again in float64.
-        redo = np.flatnonzero(np.isin(sol.status, (Status.MAX_STEPS, Status.NONFINITE)))
-        if redo.size:
-            sub = tuple(None if a is None else a[redo] for a in data)
-            again = _solve(
-                sub,
-                dtype=np.dtype(np.float64),
-                chunk=_default_chunk(np.float64, devices),
-                check=check,
-                sandwich=sandwich,
-                **kw,
-            )
-            for full, part in zip(sol, again):  # profiled or pending alike
-                full[redo] = part
+        _refit_uncertified(sol, data, check=check, sandwich=sandwich, **kw)
     if solver == "fast" and iso and errors != "gauss_newton":
         if errors == "profile":
             sol.nonlinear[sol.status == Status.CONVERGED] = _profile.PENDING
@@ -343,6 +328,22 @@ def fit_scanlines(
 
 
 # What a padded sample of each input of ``data = (f, wi, wo, mask, weights)`` holds: unusable, weight 0.
+
+
+def _refit_uncertified(sol: _varpro.ScanlineSolution, data, *, devices, **kw) -> None:
+    """Fit again in float64, in place, the float32 fits that are not certified.
+
+    Rounding can cancel the algebraic centring into a spurious optimum (~3 in 10⁴ scanlines with
+    broad lobes): those rows (status ``max_steps`` or ``nonfinite``) take float64's results, profiled
+    or pending alike.
+    """
+    redo = np.flatnonzero(np.isin(sol.status, (Status.MAX_STEPS, Status.NONFINITE)))
+    if redo.size:
+        sub = tuple(None if a is None else a[redo] for a in data)
+        f64 = np.dtype(np.float64)
+        again = _solve(sub, dtype=f64, chunk=_default_chunk(f64, devices), devices=devices, **kw)
+        for full, part in zip(sol, again):
+            full[redo] = part
 
 
 def _check_devices(devices) -> list:
