@@ -170,7 +170,6 @@ def test_a_banded_fit_equals_the_whole_image_fit(captures, layout):
     np.testing.assert_array_equal(banded.dark, whole.dark)
 
 
-@pytest.mark.slow  # ~45 s, nearly all compiling the whole fit for 24-row bands (shapes no other test uses)
 def test_the_fit_path_never_decodes_a_whole_image(captures, tmp_path, monkeypatch):
     # wardjax.run.fit_one (load, reconstruct in bands, bin, fit, texture band by band, outputs) on a
     # compressed tiled capture: every read is a window of a band's rows or the standard's crop, and the
