@@ -179,7 +179,6 @@ def test_combined_isotropic_matches_the_truth_and_pools_information(iso_fit):
     assert c.reduced_chi2 == pytest.approx(1.0, abs=0.1)
 
 
-@pytest.mark.slow  # ~20 s, nearly all compiling the unweighted joint refit's program
 def test_combined_rho_d_sigma_follows_each_channels_noise():
     """ρd's σ per channel: each channel's own residual variance (unit weights, noise ∝ signal, a red surface).
 
