@@ -64,7 +64,7 @@ def negative_flag(a):
 
 
 def check_sign(flags) -> None:
-    """Raise the negative-weights error if any chunk's flag (``_any_negative_jit`` on its device) is set."""
+    """Raise the negative-weights error if any chunk's flag (:func:`negative_flag`, read from its device) is set."""
     if any(bool(f) for f in flags):
         raise ValueError(NEGATIVE_WEIGHTS)
 
