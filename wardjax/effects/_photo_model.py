@@ -32,12 +32,13 @@ follow in closed form (variable projection, Golub & Pereyra 1973;
 in coordinates ``u`` free of their bounds, ``x = m + h tanh u`` (``m``, ``h``
 the middle and half-width of each bound), from the best ``log α`` of a grid
 (or a fit made before); their covariance is ``(JᵀJ)⁻¹``, ``J = ∂r/∂x`` at the
-solution (central differences; the grid and ``J`` are evaluated on the host,
-in NumPy, to keep the compiled program to the LM loop). Each step's damped system is solved by its normal equations (a
-Cholesky factor of ``JᵀJ + λI``, at most 4 × 4: a smaller program than a QR
-of ``J``). One compiled program serves every set of gains (those not fitted
-held at 0, no gain) and every capture of a size bucket: the problems and
-views are padded with unweighted ones to the next power of two.
+solution (:func:`jax.jacfwd` of the residuals, in the same compiled program as
+the LM loop; the starting grid is evaluated on the host, in NumPy). Each step's
+damped system is solved by its normal equations (a Cholesky factor of ``JᵀJ +
+λI``, at most 4 × 4: a smaller program than a QR of ``J``). One compiled program
+serves every set of gains (those not fitted held at 0, no gain) and every
+capture of a size bucket: the problems and views are padded with unweighted ones
+to the next size of :func:`wardjax._shapes.bucket`.
 """
 
 from __future__ import annotations
@@ -54,6 +55,7 @@ import lineax as lx
 import numpy as np
 import optimistix as optx
 
+from .._shapes import bucket
 from ..ward import ward_geometry
 
 __all__ = [
@@ -242,10 +244,6 @@ class _Args(NamedTuple):
     s_max: _Arr
 
 
-def _bucket(n: int) -> int:
-    return 1 << max(int(n) - 1, 0).bit_length()
-
-
 _ALL = tuple(RADIAL)  # every gain: one compiled fit serves each set of them, the others held at 0 (no gain)
 
 
@@ -256,13 +254,13 @@ def _layout(names: tuple[str, ...]) -> np.ndarray:
 
 
 def _args(data: PhotoData, keep: np.ndarray, bounded: bool = False, pad: bool = False) -> _Args:
-    """:class:`_Args` of the views ``keep (P, V)``; ``pad``: problems and views padded to powers of two
-    with unweighted views (gain 1, a lobe of 0), which change no residual."""
+    """:class:`_Args` of the views ``keep (P, V)``; ``pad``: problems and views padded to their
+    :func:`~wardjax._shapes.bucket` with unweighted views (gain 1, a lobe of 0), which change no residual."""
     top, s_max = (math.log(BOUNDED["alpha"]), BOUNDED["rho_s"]) if bounded else (_LOG_ALPHA[1], math.inf)
     lo = np.array([_LOG_ALPHA[0]] + [b[0] for n in _ALL for b in RADIAL[n].bounds])
     hi = np.array([top] + [b[1] for n in _ALL for b in RADIAL[n].bounds])
     p, v = data.radius2.shape
-    shape = (_bucket(p), _bucket(v)) if pad else (p, v)
+    shape = (bucket(p), bucket(v)) if pad else (p, v)
 
     def put(a, fill=0.0):
         out = np.full(shape + a.shape[2:], fill)
@@ -316,7 +314,8 @@ def _residuals(x, a: _Args, s=None, xp=jnp):
 
 @jax.jit
 def _solve(x0, free, a: _Args):
-    """LM in the unbounded ``u`` from ``x0``, the parameters not ``free`` held at 0; returns ``x``."""
+    """LM in the unbounded ``u`` from ``x0``, the parameters not ``free`` held at 0; returns ``x`` and
+    ``∂r/∂x`` there ``(M, len(x))`` (forward-mode autodiff; the padded views' rows are 0)."""
 
     def x_of(u):
         return jnp.where(free, a.mid + a.half * jnp.tanh(u), 0.0)
@@ -328,19 +327,8 @@ def _solve(x0, free, a: _Args):
         max_steps=256,
         throw=False,
     )
-    return x_of(sol.value)
-
-
-def _jacobian(x: np.ndarray, at: np.ndarray, a: _Args) -> np.ndarray:
-    """``(M, len(at))`` ``∂r/∂x`` of the parameters ``at`` by central differences (host, float64)."""
-    cols = []
-    for i in at:
-        h = 1e-6 * max(1.0, abs(float(x[i])))
-        up, down = x.copy(), x.copy()
-        up[i] += h
-        down[i] -= h
-        cols.append((_residuals(up, a, xp=np)[0] - _residuals(down, a, xp=np)[0]).ravel() / (2 * h))
-    return np.stack(cols, -1)
+    x = x_of(sol.value)
+    return x, jax.jacfwd(lambda y: _residuals(y, a)[0].ravel())(x)
 
 
 def _split(x: np.ndarray, names: tuple[str, ...]) -> dict[str, np.ndarray]:
@@ -379,9 +367,9 @@ def fit_shared(
         x0[0] = _GRID[int(np.argmin([np.sum(_residuals(np.r_[t, x0[1:]], a, xp=np)[0] ** 2) for t in _GRID]))]
     with jax.enable_x64(True):  # float64 for fitting, scoped (the user's setting is left alone)
         padded = jax.tree.map(jnp.asarray, _args(data, keep, bounded, pad=True))
-        x = np.asarray(_solve(jnp.asarray(x0), jnp.asarray(free), padded))
+        x, jac = (np.asarray(v) for v in _solve(jnp.asarray(x0), jnp.asarray(free), padded))
     r, s = _residuals(x, a, xp=np)
-    x, jac = x[at], _jacobian(x, at, a)
+    x, jac = x[at], jac[:, at]
     chi2 = float(np.sum(r**2))
     w = data.w * keep[..., None]
     n_obs = int(np.sum(w > 0))
