@@ -34,8 +34,8 @@ the middle and half-width of each bound), from the best ``log α`` of a grid
 (or a fit made before); their covariance is ``(JᵀJ)⁻¹``, ``J = ∂r/∂x`` at the
 solution (:func:`jax.jacfwd` of the residuals, in the same compiled program as
 the LM loop; the starting grid is evaluated on the host, in NumPy). Each step's
-damped system is solved by its normal equations (a Cholesky factor of ``JᵀJ +
-λI``, at most 4 × 4: a smaller program than a QR of ``J``). One compiled program
+damped system is solved by its normal equations (a Cholesky factor of
+``JᵀJ + λI``, at most 4 × 4: a smaller program than a QR of ``J``). One compiled program
 serves every set of gains (those not fitted held at 0, no gain) and every
 capture of a size bucket: the problems and views are padded with unweighted ones
 to the next size of :func:`wardjax._shapes.bucket`.
