@@ -1,7 +1,7 @@
 """Held-out-photo error as effects are added: shared lobe → (per-cluster lobes) → + normals → + clusters.
 
     python -m benchmarks.svbrdf_table [--size 32] [--hold-out 0 4] [--renderer radiance]
-        [--bump-amplitude 0.6] [--out FILE] [--figure PNG]
+        [--bump-amplitude 0.6] [--models shared clusters ...] [--out FILE] [--figure PNG]
 
 Radiance renders (or wardjax's forward model) of :func:`wardjax.render.flash_views`:
 9 flash photos of a checkerboard of two materials (ρs 0.06 / 0.12, α 0.08 / 0.2)
@@ -14,7 +14,8 @@ cluster labels right, and the robust SD of ρd's z-scores against the truth.
 The second row is the per-cluster model without normals, its count chosen as
 :func:`wardjax.fit_pixels` chooses it (BIC, and each count must lower the
 held-out error of every smaller one); the rows after it add normals, then
-lobes per cluster with them, then the height field.
+lobes per cluster with them, then the height field. ``--models`` runs some rows only
+(``shared``, ``clusters``, ``shared+normals``, ``clusters+normals``, ``height``; default all).
 ``--out`` also writes the table, after a provenance line (commit, machine, load, date);
 ``--figure`` the held-out photos of the last model (observed, predicted, residual over σ).
 """
@@ -25,13 +26,13 @@ import argparse
 
 import numpy as np
 
-MODELS = (
-    ("shared lobe", "shared", False, False),
-    ("per-cluster lobes (count on held-out photos)", "clusters", False, False),
-    ("shared lobe + normals", "shared", True, False),
-    ("+ per-cluster lobes", "clusters", True, False),
-    ("+ height field", "clusters", True, True),
-)
+MODELS = {  # option name: (row name, lobe, normals, height field)
+    "shared": ("shared lobe", "shared", False, False),
+    "clusters": ("per-cluster lobes (count on held-out photos)", "clusters", False, False),
+    "shared+normals": ("shared lobe + normals", "shared", True, False),
+    "clusters+normals": ("+ per-cluster lobes", "clusters", True, False),
+    "height": ("+ height field", "clusters", True, True),
+}
 
 
 def robust_sd(z) -> float:
@@ -75,6 +76,7 @@ def main(argv=None) -> None:
     ap.add_argument(
         "--bump-amplitude", type=float, default=0.6, help="the bumps' height in mm (default 0.6; slopes up to ±0.15)"
     )
+    ap.add_argument("--models", nargs="+", choices=tuple(MODELS), default=list(MODELS), help="rows to run")
     ap.add_argument("--out", help="also write the table here (markdown, with its provenance)")
     ap.add_argument("--figure", help="write the last model's held-out photos and residuals here (PNG)")
     args = ap.parse_args(argv)
@@ -98,7 +100,7 @@ def main(argv=None) -> None:
         f"bump slopes up to ±{float(np.max(np.abs(scene.slopes()))):.3f}; "
         f"command: python -m benchmarks.svbrdf_table --size {args.size} --hold-out "
         f"{' '.join(map(str, args.hold_out))} --renderer {args.renderer} --seed {args.seed} "
-        f"--bump-amplitude {args.bump_amplitude:g}"
+        f"--bump-amplitude {args.bump_amplitude:g} --models {' '.join(args.models)}"
     )
     emit(
         "| held out | model | held-out RMSE / noise | lobes (ρs, α) | labels right | ρd z robust SD | "
@@ -108,7 +110,7 @@ def main(argv=None) -> None:
     true_slopes = scene.slopes().reshape(-1, 2)
     panels = []
     for k in args.hold_out:
-        for name, lobe, normals, height in MODELS:
+        for name, lobe, normals, height in (MODELS[m] for m in args.models):
             held = wj.heldout_pixels(
                 data.f_r,
                 data.wi,

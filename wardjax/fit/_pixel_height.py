@@ -44,9 +44,9 @@ from scipy.sparse.linalg import LinearOperator, cg
 
 from . import _pixel_model as pm
 from ._pixel_clusters import STEPS
-from ._pixel_normals import fit_normals, normal_from_slopes
+from ._pixel_normals import fit_normals, normal_from_slopes, slope_systems
 
-__all__ = ["check_image_shape", "integrable_slopes", "on_height_field"]
+__all__ = ["check_image_shape", "heights_by_gauss_newton", "integrable_slopes", "on_height_field"]
 
 MARGIN = 8  # pixels of margin on each axis, where the height wraps round
 _EPS = 1e-4  # the curvature term's weight, over the mean precision
@@ -54,6 +54,7 @@ _RTOL = 1e-10
 _MAX_ITER = 5000
 _ROUNDS = 3  # projections onto the height field while the labels change there
 _DIRECT = 2500  # up to this many heights (the padded grid) the normal equations are solved directly
+_GN_STEPS = 20  # Levenberg–Marquardt steps on the heights (the 32² renders converge in 5–6)
 
 
 def check_image_shape(image_shape, n_pixels: int) -> tuple[int, int]:
@@ -179,6 +180,50 @@ def _iterative(ops, wt, rhs, normal, shape, padded) -> np.ndarray:
     return height
 
 
+def heights_by_gauss_newton(g, data, theta_p, s_p, tangent, normalization: str, shape, *, steps: int = _GN_STEPS):
+    """The height field of least summed χ², ``h* = argmin_h Σ_p χ²_p((D h)_p)``, from integrable slopes ``g (P, 2)``.
+
+    Each pixel's χ² (ρd profiled, its lobe ``theta_p (P, d)``, ``s_p (P,)`` given) is linearised at the
+    current slopes (:func:`~._pixel_normals.slope_systems`: ``H_p = JᵀJ``, ``b_p = Jᵀr``), and the step
+    is the projection (:func:`integrable_slopes`) of the Levenberg–Marquardt targets
+    ``g − (H_p + λ s̄ I)⁻¹ b_p`` with precision ``H_p + λ s̄ I`` (``s̄`` the mean of ``tr H / 2``): one
+    Gauss–Newton step in the heights, since ``D`` is linear. A step is kept where the summed χ² falls
+    (``λ`` × 0.3), else ``λ`` × 10; at most ``steps`` steps.
+
+    Projecting each pixel's own optimum with its own Gauss–Newton precision (the first step of
+    :func:`on_height_field`) is this with every χ² replaced by its quadratic model at that optimum: where a
+    pixel's photos see only its highlight's tails, χ² is far from quadratic over the slopes its neighbours
+    ask of it, and the projected slopes are not the surface that fits the photos best.
+
+    Returns the slopes ``(P, 2)`` and their summed χ².
+    """
+    f, w, wi, wo = data
+    eye = np.eye(2)[None]
+
+    def system(g):
+        out = slope_systems(jnp.asarray(g), f, w, wi, wo, theta_p, s_p, tangent, normalization=normalization)
+        return tuple(np.asarray(x) for x in out)
+
+    g = np.asarray(g, np.float64)
+    h, b, c = system(g)
+    cost, lam = float(np.sum(c)), 1e-3
+    for _ in range(steps):
+        damped = h + lam * float(np.mean(np.trace(h, axis1=1, axis2=2))) / 2.0 * eye
+        target = g - np.linalg.solve(damped, b[..., None])[..., 0]
+        trial, _ = integrable_slopes(target, damped, shape)
+        h_new, b_new, c_new = system(trial)
+        if not float(np.sum(c_new)) < cost:
+            lam *= 10.0
+            if lam > 1e6:
+                break
+            continue
+        done = cost - float(np.sum(c_new)) < 1e-9 * cost
+        g, h, b, cost, lam = trial, h_new, b_new, float(np.sum(c_new)), 0.3 * lam
+        if done:
+            break
+    return g, cost
+
+
 @jax.jit
 def relabel(theta, s, labels, geom, f, w):
     """``(P,)`` each pixel's lobe at fixed normals: the one of lowest ``χ²_pl − 2 log π_l`` (ρd profiled,
@@ -211,6 +256,7 @@ def on_height_field(theta, s, labels, normal_map, data, t, normalization, shape)
         cov_g = np.where(np.all(np.isfinite(cov_g), (1, 2))[:, None, None], cov_g, 0.0)
         g = np.asarray(g)
         g_star, _ = integrable_slopes(g, np.linalg.pinv(cov_g), shape)
+        g_star, _ = heights_by_gauss_newton(g_star, data, theta[labels], s[labels], t, normalization, shape)
         moved = moved or float(np.sqrt(np.mean((g_star - g) ** 2)))
         normal_map = normal_from_slopes(jnp.asarray(g_star))
         geom = pm.geometry(wi, wo, normal_map, t, normalization)

@@ -28,7 +28,7 @@ import numpy as np
 
 from ._pixel_model import basis, geometry
 
-__all__ = ["MAX_SLOPE", "fit_normals", "normal_from_slopes", "normal_jacobian"]
+__all__ = ["MAX_SLOPE", "fit_normals", "normal_from_slopes", "normal_jacobian", "slope_systems"]
 
 MAX_SLOPE = 1.0  # 45°: beyond this a bump is a facet the flat-sample geometry no longer describes
 _STEPS = 16
@@ -143,3 +143,19 @@ def fit_normals(
         out = _chunk(*parts, tangent, normalization=normalization, warm=g0 is not None, grid=grid or g0 is None)
         outs.append([o[: chunk - pad] for o in out])
     return tuple(jnp.concatenate([o[i] for o in outs], 0) for i in range(5))
+
+
+@functools.partial(jax.jit, static_argnames=("normalization",))
+def slope_systems(g, f, w, wi, wo, theta_p, s_p, tangent, *, normalization: str):
+    """Every pixel's χ² at its slopes ``g (P, 2)`` (ρd profiled, the lobe given) and its Gauss–Newton model there:
+    ``JᵀJ (P, 2, 2)``, ``Jᵀr (P, 2)`` and ``rᵀr (P,)``, ``J = ∂r/∂g`` of the profiled residuals (variable
+    projection), so that ``χ²(g + δ) ≈ rᵀr + 2 δᵀJᵀr + δᵀJᵀJ δ``."""
+
+    def one(g, f, w, wi, wo, theta, s):
+        def res(g):
+            return _profiled_residual(g, f, w, wi, wo, theta, s, tangent, normalization)[0]
+
+        r, j = res(g), jax.jacfwd(res)(g)
+        return j.T @ j, j.T @ r, r @ r
+
+    return jax.vmap(one)(g, f, w, wi, wo, theta_p, s_p)
