@@ -27,6 +27,14 @@ assembled (:mod:`scipy.sparse`) and solved directly; above, by conjugate
 gradients (:func:`scipy.sparse.linalg.cg`, FFTs of :mod:`numpy.fft`),
 preconditioned by their Fourier-diagonal part. ``h`` is known up to a constant.
 
+That projection is each pixel's χ² replaced by its quadratic model at the
+pixel's own optimum. Where a pixel's photos see only the tails of its
+highlight, χ² is far from quadratic over the slopes its neighbours ask of it,
+and the projected surface is not the one that fits the photos best: from it,
+:func:`heights_by_gauss_newton` takes Levenberg–Marquardt steps in the heights
+on the summed χ² itself, ``min_h Σ_p χ²_p((D h)_p)``, each step the same
+projection of every pixel's Gauss–Newton model at its current slopes.
+
 Heights are in units of the pixel pitch (square pixels); rows run along
 ``−y`` and columns along ``+x`` (the rectified layout of
 :func:`wardjax.render.flash_views`), so ``g_x = ∂h/∂column`` and
