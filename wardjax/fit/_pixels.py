@@ -448,7 +448,8 @@ def fit_pixels(
     height_field
         ``(H, W)``: the pixels are an ``H × W`` image (row-major, rows along ``−y``, square
         pixels). With ``normals=True`` the fitted normals are then projected onto the nearest
-        height field (:mod:`._pixel_height`) and ρd and the lobes refitted at them. Pass it
+        height field, which is then moved to the one of least summed χ² (:mod:`._pixel_height`),
+        and ρd and the lobes refitted at them. Pass it
         whenever the pixels are an image: the per-pixel normal is under-determined where the
         photos see only a highlight's tails, and its neighbours tell it.
     fixed_normals
