@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-from collections import OrderedDict
-
 import numpy as np
 import pytest
 from threadpoolctl import threadpool_info, threadpool_limits
@@ -110,13 +108,13 @@ def test_exported_program_is_read_back_without_tracing_and_gives_the_same_number
 
     jitted = jax.jit(_program, static_argnames="k")
     x, tree = rng.normal(size=6), {"a": rng.normal(size=(6, 6)), "b": rng.normal(size=6)}
-    monkeypatch.setattr(_exported, "_LOADED", OrderedDict())
+    _exported._loaded.cache_clear()
     monkeypatch.setattr(_exported, "_folder", lambda: tmp_path)
     with jax.enable_x64(True):
         want = [np.asarray(v) for v in jitted(x, tree, k=3)]
         got = _exported.call("t", functools.partial(jitted, k=3), (("k", 3),), (x, tree))
         assert len(list(tmp_path.glob("t-*.bin"))) == 1
-        monkeypatch.setattr(_exported, "_LOADED", OrderedDict())  # a new process: only the file is left
+        _exported._loaded.cache_clear()  # a new process: only the file is left
 
         def no_trace(*_a, **_k):
             raise AssertionError("traced again")

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import functools
-from collections import OrderedDict
 
 import numpy as np
 
@@ -19,7 +18,6 @@ def test_writing_a_program_removes_other_builds_files_and_keeps_this_builds(tmp_
 
     from wardjax.effects import _exported
 
-    monkeypatch.setattr(_exported, "_LOADED", OrderedDict())
     monkeypatch.setattr(_exported, "_folder", lambda: tmp_path)
     x = np.arange(3.0)
     jitted = jax.jit(_square_plus, static_argnames="k")
@@ -41,27 +39,34 @@ def test_writing_a_program_removes_other_builds_files_and_keeps_this_builds(tmp_
     assert len(list(tmp_path.glob(f"t-{'b' * 12}-*.bin"))) == 2
 
 
-def test_a_process_keeps_the_most_recently_used_programs_loaded(tmp_path, monkeypatch):
-    """Past ``_MAX_LOADED`` programs the least recently used is dropped from memory (its file stays, to be read
-    back); one used again moves to the front."""
+def test_a_process_reads_each_program_once_and_keeps_a_bounded_number_loaded(tmp_path, monkeypatch):
+    """The process that writes a program and every later call run it as read back from its file, which is read
+    once while it stays among the ``_MAX_LOADED`` most recently used; one dropped is read back from its file."""
     import jax
 
     from wardjax.effects import _exported
 
-    monkeypatch.setattr(_exported, "_LOADED", OrderedDict())
+    _exported._loaded.cache_clear()
     monkeypatch.setattr(_exported, "_folder", lambda: tmp_path)
-    monkeypatch.setattr(_exported, "_MAX_LOADED", 2)
     x = np.arange(3.0)
     jitted = jax.jit(_square_plus, static_argnames="k")
 
     def run(k):
         return np.asarray(_exported.call("t", functools.partial(jitted, k=k), (("k", k),), (x,)))
 
-    run(1)
-    keys = list(_exported._LOADED)
+    run(1)  # not on disk: traced, written, read back
     run(2)
-    run(1)  # used again: now the most recent
-    run(3)  # the third: k = 2, the least recently used, is dropped
-    assert len(_exported._LOADED) == 2 and keys[0] in _exported._LOADED
-    assert len(list(tmp_path.glob("t-*.bin"))) == 3
-    np.testing.assert_array_equal(run(2), x * x + 2)  # read back from its file
+    info = _exported._loaded.cache_info()
+    assert (info.hits, info.misses) == (0, 4)  # two missing files, two reads
+    np.testing.assert_array_equal(run(1), x * x + 1)
+    np.testing.assert_array_equal(run(2), x * x + 2)
+    info = _exported._loaded.cache_info()
+    assert (info.hits, info.misses, info.currsize, info.maxsize) == (2, 4, 2, _exported._MAX_LOADED)
+    files = sorted(tmp_path.glob("t-*.bin"))
+    assert len(files) == 2
+    _exported._loaded.cache_clear()  # dropped from memory: read back from its file, nothing written again
+    stamps = [f.stat().st_mtime_ns for f in files]
+    np.testing.assert_array_equal(run(2), x * x + 2)
+    info = _exported._loaded.cache_info()
+    assert (info.hits, info.misses, info.currsize) == (0, 1, 1)
+    assert [f.stat().st_mtime_ns for f in sorted(tmp_path.glob("t-*.bin"))] == stamps

@@ -235,6 +235,7 @@ def _baseline(model, data, testable, lm_steps: int, chunk: int, texture: bool):
     """
     carry = texture and model.kind == "scanline" and getattr(data, "kind", None) in ("ratio", "brdf")
     plain = _Search(model, identity_whitened(data) if carry else data, testable, lm_steps, chunk)
+    plain.warm_view()  # its program compiles while the baseline's fits compile theirs
     cur = plain.residual_view(_fit_baseline(plain))
 
     def make(d):

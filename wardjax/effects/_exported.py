@@ -24,7 +24,8 @@ How
     build (the libraries' versions and the wardjax source), and writing a program removes the files of every other
     build, which no process of this build reads again. So the folder stays as large as one build's programs (a
     few, ~1 MB each) however often the source changes. In a process the loaded programs are kept, the most
-    recently used ``_MAX_LOADED`` of them. Custom calls whose
+    recently used ``_MAX_LOADED`` of them (:func:`_loaded`); the process that writes a program runs it as read
+    back from its file, as every later process does. Custom calls whose
     compatibility across JAX versions is not guaranteed (LAPACK's QR) are allowed: a file is only read by the JAX
     version that wrote it.
 """
@@ -34,7 +35,6 @@ from __future__ import annotations
 import functools
 import hashlib
 import importlib.metadata
-from collections import OrderedDict
 from collections.abc import Callable
 from pathlib import Path
 
@@ -56,7 +56,6 @@ _CUSTOM_CALLS = (
 # the libraries whose Python code is traced into the programs (their versions enter each file's name)
 _TRACED_WITH = ("jax", "jaxlib", "equinox", "lineax", "optimistix")
 _MAX_LOADED = 32  # programs kept loaded in a process (a discovery run uses two or three)
-_LOADED: OrderedDict[str, Callable] = OrderedDict()  # digest → the jitted call of its program, most recent last
 
 
 @functools.cache
@@ -121,20 +120,14 @@ def _prune(folder: Path) -> None:
             old.unlink(missing_ok=True)  # a concurrent process may have removed it
 
 
-def _remember(key: str, run: Callable) -> Callable:
-    """Keep ``run`` as the loaded program of ``key``, dropping the least recently used past ``_MAX_LOADED``."""
-    _LOADED[key] = run
-    _LOADED.move_to_end(key)
-    while len(_LOADED) > _MAX_LOADED:
-        _LOADED.popitem(last=False)
-    return run
+@functools.lru_cache(maxsize=_MAX_LOADED)
+def _loaded(path: Path) -> Callable:
+    """The program in ``path``, deserialised and jitted; the most recently used ``_MAX_LOADED`` stay loaded.
 
-
-def _load(path: Path) -> Callable | None:
-    try:
-        return jax.jit(export.deserialize(bytearray(path.read_bytes())).call)
-    except (OSError, ValueError, TypeError):  # unreadable or written by an interrupted run: trace it again
-        return None
+    Raises ``OSError`` (no such file), ``ValueError`` or ``TypeError`` (written by an interrupted run), which
+    leaves nothing cached: the caller traces the program and writes it.
+    """
+    return jax.jit(export.deserialize(bytearray(path.read_bytes())).call)
 
 
 def call(name: str, fn: Callable, static: tuple, args: tuple):
@@ -147,14 +140,10 @@ def call(name: str, fn: Callable, static: tuple, args: tuple):
     if folder is None:
         return fn(*args)
     leaves, treedef = jax.tree_util.tree_flatten(args)
-    key = _digest(name, static, treedef, leaves)
-    run = _LOADED.get(key)
-    if run is not None:
-        _LOADED.move_to_end(key)
-        return run(*leaves)
-    path = folder / f"{name}-{_build()}-{key}.bin"
-    run = _load(path) if path.exists() else None
-    if run is None:
+    path = folder / f"{name}-{_build()}-{_digest(name, static, treedef, leaves)}.bin"
+    try:
+        run = _loaded(path)
+    except (OSError, ValueError, TypeError):  # not written yet, or by an interrupted run: trace it and write it
 
         def flat(*xs):
             return fn(*jax.tree_util.tree_unflatten(treedef, xs))
@@ -164,8 +153,10 @@ def call(name: str, fn: Callable, static: tuple, args: tuple):
             exp = export.export(jax.jit(flat), disabled_checks=checks)(*leaves)
             blob = exp.serialize()
         except (NotImplementedError, ValueError):  # host callbacks, another custom call: run it as it is
-            _remember(key, flat)
             return fn(*args)
         _write(path, blob)
-        run = jax.jit(exp.call)
-    return _remember(key, run)(*leaves)
+        try:
+            run = _loaded(path)
+        except (OSError, ValueError, TypeError):  # not written (a read-only folder): this trace, not kept
+            run = jax.jit(exp.call)
+    return run(*leaves)

@@ -532,14 +532,18 @@ class ScanlineModel:
 
     def residuals(self, vals, active, effects, data, ctx=None):
         """Whitened residuals, flat: the values' ``(S N C)``, then the scanline levels' (``data.levels``)."""
+        return self.evaluate(vals, active, effects, data, ctx)[0]
+
+    def evaluate(self, vals, active, effects, data, ctx=None):
+        """:meth:`residuals` and :meth:`predict`'s prediction ``(S, N, C)`` and profiled ρd ``(S, 1, C)`` from one
+        evaluation of the model (a traced program holds one copy of it, not two)."""
         ctx = self.context(data) if ctx is None else ctx
-        r, _, rho, _ = self._profile(vals, active, effects, data, ctx)
+        r, f, rho, _ = self._profile(vals, active, effects, data, ctx)
         if data.levels is None:
-            return r.reshape(-1)
+            return r.reshape(-1), f, rho
         P, a = data.levels
-        return jnp.concatenate(
-            [r.reshape(-1), P @ (rho[:, 0, :] @ a) / self._level_slope(vals, active, effects, data, ctx)]
-        )
+        lv = P @ (rho[:, 0, :] @ a) / self._level_slope(vals, active, effects, data, ctx)
+        return jnp.concatenate([r.reshape(-1), lv]), f, rho
 
     def _level_slope(self, vals, active, effects, data, ctx):
         """The measurement chain's mean slope ``D = ⟨∂M⁻¹/∂y⟩`` at the baseline's mean diffuse level (1 without one).

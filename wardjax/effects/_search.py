@@ -8,8 +8,10 @@ structure tests read off it.
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import math
+import threading
 from typing import NamedTuple
 
 import jax
@@ -58,6 +60,7 @@ class _Search:
         self.recheck: VariogramRecheck | None = None  # ... and the guard's second opinion
         self.holdout: Holdout | None = None  # the winner must predict held-out scanlines
         self.remeasure: TextureRemeasure | None = None  # the texture measured again after each named effect
+        self._warming: threading.Thread | None = None  # the residual view's program compiling (warm_view)
         # whitened by the texture's covariance, an LM step costs far more than a call's overhead: each fit alone
         # (batched, the baseline's 3 starts ran padded to the step's 16, every one until the slowest converged)
         self.solo = self.n_obs >= _SOLO_MIN_OBS or getattr(data, "whiten", None) is not None
@@ -137,14 +140,39 @@ class _Search:
             free=tuple(int(j) for j in idx[km]),
         )
 
-    def residual_view(self, st: FitState) -> _View:
-        """Whitened residuals, prediction and covariates of ``st``: what the structure tests and plots read."""
-        act = np.array([i in st.active for i in range(len(self.testable))], bool)
+    def warm_view(self) -> None:
+        """Compile the residual view's program in a background thread, while the caller compiles the fits'.
+
+        XLA compiles with the GIL released, so on two cores the two programs
+        compile side by side (a cold ``wardjax diagnose`` compiles both
+        before its first structure test). The thread evaluates the view at
+        the initial values and drops the result; :meth:`residual_view` waits
+        for it, so the program is compiled once. An error there is left to
+        the first real call to raise.
+        """
+
+        def compile_it():
+            with contextlib.suppress(Exception):  # the first real call raises it
+                self._view_arrays(self.layout.u_initial(), ())
+
+        self._warming = threading.Thread(target=compile_it, name="wardjax-warm-view", daemon=True)
+        self._warming.start()
+
+    def _view_arrays(self, u, active):
+        """``_residual_view``'s arrays (device) at parameters ``u`` with the effects ``active`` switched on."""
+        act = np.array([i in active for i in range(len(self.testable))], bool)
         static = dict(model=self.model, effects=self.testable, layout_key=self.layout.key)
         with jax.enable_x64(True):  # the parameters too: outside, jnp.asarray would round them to float32
             fn = functools.partial(_residual_view, **static)
-            args = (jnp.asarray(st.u), jnp.asarray(act), self.data_dev)
-            r, pred, rho, lv = _exported.call("residual_view", fn, static_key(static), args)
+            args = (jnp.asarray(u), jnp.asarray(act), self.data_dev)
+            return _exported.call("residual_view", fn, static_key(static), args)
+
+    def residual_view(self, st: FitState) -> _View:
+        """Whitened residuals, prediction and covariates of ``st``: what the structure tests and plots read."""
+        if self._warming is not None:
+            self._warming.join()
+            self._warming = None
+        r, pred, rho, lv = self._view_arrays(st.u, st.active)
         r, pred = np.asarray(r), np.asarray(pred)
         rho = None if rho is None else np.asarray(rho)
         return _View(st, r, pred, self.model.covariates(self.data, pred), rho, float(lv))

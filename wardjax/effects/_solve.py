@@ -99,6 +99,8 @@ def _solve_batch(u0, a0, idx, kmask, active, prior_w, tol, data, *, model, effec
             act = {e.name: active[i] for i, e in enumerate(effects)}
             return model.residuals(vals, act, effects, data, ctx)
 
+        n_data = jax.eval_shape(data_resid, u0[idx]).shape[0]
+
         def resid(z, _):
             return jnp.concatenate([data_resid(z), pw * (z - z0)])
 
@@ -106,9 +108,12 @@ def _solve_batch(u0, a0, idx, kmask, active, prior_w, tol, data, *, model, effec
         solver = optx.LevenbergMarquardt(rtol=tol[0], atol=tol[1], linear_solver=_LINEAR_SOLVER)
         sol = optx.least_squares(resid, solver, u0[idx], max_steps=max_steps, throw=False)
         z = sol.value
-        r = data_resid(z)
+        # the residuals and the Jacobian at the solution are the solver's last accepted linearisation
+        # (``f_info``: the data's rows, then the priors'), not evaluated again: the model stays one copy in the program
+        info = sol.state.f_info
+        r = info.residual[:n_data]
         chi2 = jnp.sum(r * r)
-        jac = jax.jacfwd(data_resid)(z)
+        jac = info.jac.as_matrix()[:n_data]
         jtj = jac.T @ jac
         ok = (sol.result == optx.RESULTS.successful) & jnp.isfinite(chi2)
         u = u0.at[idx].set(jnp.where(kmask, z, u0[idx]))
@@ -131,8 +136,12 @@ def _residual_view(u, active, data, *, model, effects, layout_key):
     names = tuple(e.name for e in effects)
     vals = _unpack(layout_key, u, names)
     act = {e.name: active[i] for i, e in enumerate(effects)}
-    pred, rho, _ = model.predict(vals, act, effects, data)
-    r = model.residuals(vals, act, effects, data)  # the values', then the scanline levels'
+    if hasattr(model, "evaluate"):  # residuals and prediction from one evaluation: one copy of the model to compile
+        r, pred, rho = model.evaluate(vals, act, effects, data)
+    else:
+        pred, rho, _ = model.predict(vals, act, effects, data)
+        r = model.residuals(vals, act, effects, data)
+    # r: the values', then the scanline levels'
     return r[: pred.size], pred, rho, jnp.sum(r[pred.size :] ** 2)
 
 
