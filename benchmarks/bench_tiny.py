@@ -76,11 +76,13 @@ def stages(k: int, rows: int = 1024) -> None:
         f64 = np.dtype(np.float64)
         geometry = lambda: _scanline._geometry_chunk(d.f_r, d.wi, d.wo, None, None, normalization="ward1992", dtype=f64)
         parts = geometry()
-        n = None if _scanline._sample_bucket(k) == k else jnp.asarray(k, jnp.int32)
-        moments = lambda: _data.moments_chunk(*parts, n, iso=True)
+        n_pad = _scanline._sample_bucket(k)
+        n = None if n_pad == k else jnp.asarray(k, jnp.int32)
+        small = _scanline._small_programs(n_pad, jax.devices())  # the programs fit_scanlines runs
+        moments = lambda: _data.moments_chunk.pick(small)(*parts, n, iso=True)
         prep = moments()
         lanes = _scanline._profile_lanes(rows, k)
-        search = lambda raw=None, check=False, lanes=0: _scanline._search_chunk(
+        search = lambda raw=None, check=False, lanes=0: _scanline._search_chunk.pick(small)(
             prep, raw, iso=True, rtol=0.0, check=check, lanes=lanes
         )
         pending = float(np.mean(np.asarray(search(parts, True).nonlinear) != 0))

@@ -498,3 +498,53 @@ def test_device_arrays_stay_on_the_device_and_fit_the_same(iso_fit, monkeypatch)
         np.testing.assert_array_equal(dev.errors, host.errors)
     with pytest.raises(ValueError, match="weights must be non-negative"):
         wj.fit_scanlines(*on_dev[:3], weights=-on_dev[3])
+
+
+def test_small_problem_programs_fall_back_where_xla_lacks_their_option(monkeypatch):
+    # Problems of few samples run programs compiled without YNNPACK fusions (an XLA:CPU option); an XLA
+    # that does not know the option must leave them the default programs, not fail the fit.
+    from wardjax.fit import _data
+
+    _data._small_options.cache_clear()
+    try:
+        assert _data._small_options() == _data._SMALL_OPTIONS  # this JAX knows it
+        monkeypatch.setattr(_data, "_SMALL_OPTIONS", {"xla_cpu_no_such_option": ""})
+        _data._small_options.cache_clear()
+        assert _data._small_options() == {}
+    finally:
+        monkeypatch.undo()
+        _data._small_options.cache_clear()
+
+
+@pytest.mark.slow  # compiles the search for 9 samples twice (~10 s)
+def test_small_problem_programs_fit_what_the_general_ones_fit():
+    # The same sums in another order: every output equal to rounding, the statuses and the curvature
+    # check's verdicts identical, on 9-sample problems with the check, the sandwich and the profiles.
+    from wardjax.fit import _data, _scanline
+
+    rng = np.random.default_rng(5)
+    s = 256
+    a = rng.uniform(0.03, 0.3, s)
+    truth = wj.WardParams(rho_d=rng.uniform(0.05, 0.8, (s, 3)), rho_s=rng.uniform(0.01, 0.1, s), alpha_x=a, alpha_y=a)
+    rig = wj.ScanlineRig.random(s, rng)
+    data = wj.simulate_scanlines(truth, x_offsets=x_offset_for_slope(rig, 0.3 * a), rig=rig, n_samples=9, seed=rng)
+    with jax.enable_x64(True):
+        f64 = np.dtype(np.float64)
+        parts = _scanline._geometry_chunk(data.f_r, data.wi, data.wo, None, None, normalization="ward1992", dtype=f64)
+        out = {}
+        for small in (False, True):
+            prep = _data.moments_chunk.pick(small)(*parts, None, iso=True)
+            out[small] = _scanline._search_chunk.pick(small)(prep, parts, iso=True, rtol=0.0, check=True, lanes=32)
+    general, small = (jax.tree_util.tree_map(np.asarray, out[k]) for k in (False, True))
+    ok = general.status == wj.Status.CONVERGED
+    assert ok.mean() > 0.8 and np.any(general.nonlinear[ok] == 1)  # some rows profiled in the program
+    np.testing.assert_array_equal(small.status, general.status)
+    np.testing.assert_array_equal(small.nonlinear, general.nonlinear)
+    for name in ("rho_d", "rho_s", "alpha", "chi2"):
+        np.testing.assert_allclose(getattr(small, name)[ok], getattr(general, name)[ok], rtol=1e-6, err_msg=name)
+    # The HC3 sandwich divides squared residuals by (1 − h)²: rounding grows to ~1e-5 of an element's
+    # scale √(var_i var_j), far below what σ from 9 samples can resolve.
+    var = np.diagonal(general.cov[ok], axis1=-2, axis2=-1)
+    np.testing.assert_allclose(np.diagonal(small.cov[ok], axis1=-2, axis2=-1), var, rtol=1e-4, err_msg="var")
+    scale = np.sqrt(var[:, :, None] * var[:, None, :])
+    assert np.max(np.abs(small.cov[ok] - general.cov[ok]) / scale) < 1e-4

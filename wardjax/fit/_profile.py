@@ -25,13 +25,13 @@ Gauss–Newton errors.
 
 from __future__ import annotations
 
-import functools
 import math
 
 import jax
 import jax.numpy as jnp
 
 from . import _varpro
+from ._data import kernel
 
 __all__ = [
     "PENDING",
@@ -184,7 +184,7 @@ def _profile_lanes(prepared, sol, *, lanes: int):
     )
 
 
-@functools.partial(jax.jit)
+@kernel()
 def profile_chunk(prepared, alpha, rho_s, chi2, cov, scale):
     """:func:`profile_errors` of each scanline of a prepared chunk (vmapped)."""
     return jax.vmap(profile_errors)(prepared, alpha, rho_s, chi2, cov, scale)

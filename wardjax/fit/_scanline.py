@@ -46,10 +46,12 @@ from .._status import Status
 from ..ward import NORMALIZATIONS, WardParams, ward_geometry
 from . import _feed, _profile, _varpro
 from ._data import (
+    SMALL_SAMPLES,
     buckets,
     check_choice,
     check_sign,
     clean,
+    kernel,
     moments_chunk,
     negative_flag,
     pad_rows,
@@ -185,7 +187,7 @@ def _geometry_chunk(f, wi, wo, mask, weights, *, normalization, dtype):
     return jnp.swapaxes(f, -1, -2), geom.u, geom.v, geom.g, jnp.swapaxes(w, -1, -2)
 
 
-@functools.partial(jax.jit, static_argnames=("iso", "rtol", "check", "steps", "lanes"))
+@kernel(static_argnames=("iso", "rtol", "check", "steps", "lanes"))
 def _search_chunk(prepared, raw=None, *, iso, rtol, check, steps=None, lanes=0):
     """The search of each prepared scanline; with ``raw`` (the geometry stage's arrays) the sandwich
     covariance too, in the same program (a separate pass cost a third more CPU than the fold); with
@@ -202,12 +204,22 @@ def _profile_lanes(rows: int, n_pad: int) -> int:
     return max(rows // (8 if n_pad <= TINY else 16), 1)
 
 
-def _fast_chunk(f, wi, wo, mask, weights, n, *, iso, rtol, normalization, dtype, check, sandwich, steps=None, lanes=0):
+def _fast_chunk(
+    f, wi, wo, mask, weights, n, *, iso, rtol, normalization, dtype, check, sandwich, steps=None, lanes=0, small=False
+):
+    """One chunk through the three compiled stages; ``small``: the programs for few samples on a CPU
+    (:func:`_small_programs`)."""
     # Geometry and moments as separate programs too: ~25 % less CPU than one.
     parts = _geometry_chunk(f, wi, wo, mask, weights, normalization=normalization, dtype=dtype)
-    prepared = moments_chunk(*parts, n, iso=iso)
+    prepared = moments_chunk.pick(small)(*parts, n, iso=iso)
     raw = parts if sandwich else None
-    return _search_chunk(prepared, raw, iso=iso, rtol=rtol, check=check, steps=steps, lanes=lanes)
+    return _search_chunk.pick(small)(prepared, raw, iso=iso, rtol=rtol, check=check, steps=steps, lanes=lanes)
+
+
+def _small_programs(n_pad: int, devices) -> bool:
+    """Whether problems of ``n_pad`` (padded) samples take the programs compiled for few samples: on a
+    CPU, up to :data:`~wardjax.fit._data.SMALL_SAMPLES` (see :class:`~wardjax.fit._data.Kernel`)."""
+    return n_pad <= SMALL_SAMPLES and devices[0].platform == "cpu"
 
 
 def _steps(max_steps) -> int | None:
@@ -302,15 +314,20 @@ def fit_scanlines(
     if solver == "optimistix" and model != "isotropic":
         raise ValueError("solver='optimistix' fits the isotropic model; use res.combined() for anisotropy")
     devices = _check_devices(devices)
-    # Host memory feeding an accelerator: the weights' sign is checked on the device, chunk by chunk.
-    f, wi, wo, mask, weights = validate(
-        f_r, wi, wo, mask, weights, sign_later=_feed.host_fed((f_r, wi, wo, mask, weights), devices)
-    )
+    # Host memory feeding an accelerator: the chunks cross in worker threads, and the weights' sign is
+    # checked on the device, chunk by chunk (decided once, here, for every pass below).
+    host_fed = _feed.host_fed((f_r, wi, wo, mask, weights), devices)
+    f, wi, wo, mask, weights = validate(f_r, wi, wo, mask, weights, sign_later=host_fed)
     iso = model == "isotropic"
     chunk = int(chunk_size or _default_chunk(dtype, devices))
     data = (f, wi, wo, mask, weights)
     kw: dict[str, Any] = dict(
-        iso=iso, normalization=normalization, solver=solver, devices=devices, every_gn=errors == "profile"
+        iso=iso,
+        normalization=normalization,
+        solver=solver,
+        devices=devices,
+        every_gn=errors == "profile",
+        host_fed=host_fed,
     )
     check = errors == "auto"
     # Without weights the residual variance is unknown and may follow the signal: the sandwich.
@@ -400,6 +417,7 @@ def _solve(
     sandwich=False,
     steps=None,
     every_gn=False,
+    host_fed=False,
 ) -> _varpro.ScanlineSolution:
     """Run the kernel over ``data = (f, wi, wo, mask, weights)`` in chunks; float64 NumPy results.
 
@@ -408,10 +426,12 @@ def _solve(
     whose scanlines differ a little in length share one compiled program.
     Each call holds ``chunk`` rows per device, split over ``devices``
     (default ``jax.devices()``) along the scanline axis. ``every_gn``: Gauss–Newton's
-    covariance of every row is wanted on the host (see :func:`_to_host`).
+    covariance of every row is wanted on the host (see :func:`_to_host`). ``host_fed``
+    (:func:`~wardjax.fit._feed.host_fed` of the caller's data): the chunks cross from host memory
+    in worker threads and NumPy weights' sign is checked on the device.
     """
     devices = _check_devices(devices)
-    put = _placement(devices)
+    put = _placement(devices, direct=not host_fed)
     chunk *= len(devices)
     rtol = 0.0 if dtype == np.float64 else 64 * float(np.finfo(dtype).eps)
     n_rows, n_true = data[0].shape[0], data[0].shape[1]
@@ -428,12 +448,10 @@ def _solve(
         pieces = []
         # Whole rows on every device.
         spans = [(a, b, -(-rows // len(devices)) * len(devices)) for a, b, rows in buckets(n_rows, chunk)]
-        threaded = _feed.host_fed(data, devices)
-        if threaded:
-            put = _placement(devices, direct=False)
+        small = solver == "fast" and _small_programs(n_pad, devices)
         signs = []
-        for (start, stop, rows), args in zip(spans, _feed.chunks(data, spans, put, threaded=threaded)):
-            if threaded and args[4] is not None:
+        for (start, stop, rows), args in zip(spans, _feed.chunks(data, spans, put, threaded=host_fed)):
+            if host_fed and args[4] is not None:
                 signs.append(negative_flag(args[4]))  # validate left host weights' sign to the device
             if solver == "fast":
                 out = _fast_chunk(
@@ -447,6 +465,7 @@ def _solve(
                     sandwich=sandwich,
                     steps=steps,
                     lanes=_profile_lanes(rows, n_pad) if profile_here else 0,
+                    small=small,
                 )
             else:
                 out = _optimistix_chunk(*clean(*args, dtype=dtype), normalization=normalization)
@@ -506,6 +525,7 @@ def _profile_where_nonlinear(sol: _varpro.ScanlineSolution, data, *, normalizati
     chunk = min(_default_chunk(np.float64, devices), _ACCELERATOR_CHUNK // 4) * len(devices)
     scale = np.asarray(sol.chi2, np.float64)[rows] / np.maximum(np.asarray(sol.dof)[rows], 1)
     fit = [np.asarray(a, np.float64)[rows] for a in (sol.alpha[:, 0], sol.rho_s, sol.chi2, sol.cov_gn)]
+    small = _small_programs(n_pad, devices)
     with jax.enable_x64(True):
         n = None if n_pad == n_true else jnp.asarray(n_true, jnp.int32)
         out = []
@@ -513,9 +533,9 @@ def _profile_where_nonlinear(sol: _varpro.ScanlineSolution, data, *, normalizati
             size = -(-size // len(devices)) * len(devices)  # whole rows on every device
             args = [None if a is None else put(pad_rows(a[start:stop], size)) for a in sub]
             parts = _geometry_chunk(*args, normalization=normalization, dtype=np.dtype(np.float64))
-            prepared = moments_chunk(*parts, n, iso=True)
+            prepared = moments_chunk.pick(small)(*parts, n, iso=True)
             pick = [put(pad_rows(a[start:stop], size)) for a in (*fit, scale)]
-            sig = _profile.profile_chunk(prepared, *pick)
+            sig = _profile.profile_chunk.pick(small)(prepared, *pick)
             out.append(np.stack([np.asarray(v)[: stop - start] for v in sig], -1))
         sig = np.concatenate(out)
         # The sandwich for unweighted fits: scaled by the profile's ratio to Gauss–Newton.
