@@ -331,3 +331,28 @@ def test_a_camera_response_does_not_shrink_the_scanline_levels_chi2():
         assert ref > 10.0  # the texture between scanlines is there
         for eps in (-0.2, 0.3):
             assert abs(levels_chi2(eps) / ref - 1.0) < 0.02, eps
+
+
+def test_a_candidate_that_drives_rho_s_past_one_is_no_evidence():
+    """A specular reflectance is a fraction of the light. On a dark metal (ρs 0.35) a camera response lowered χ² by
+    40 by trading γ against the lobe (ρs 1.3, α −20 %) and was named on every untouched capture; a fit that drives
+    ρs past 1 (and past the current model's) now counts as no evidence, while the same fit with ρs in range counts
+    in full, and a current model already past 1 is held only to not going further."""
+    from wardjax.effects._candidates import _score_candidate
+    from wardjax.effects._library import GammaMismatch
+    from wardjax.effects._report import FitState
+    from wardjax.effects._search import _Search
+
+    def state(chi2: float, rho_s: float, free=(0, 1)) -> FitState:
+        values = {"model": {"rho_s": rho_s, "alpha": 0.08}, "gamma": {"eps": 0.1}}
+        return FitState(np.zeros(3), chi2, 4000, chi2 / 4000, True, np.eye(3), (), values, {}, free)
+
+    search = _Search.__new__(_Search)  # only what scoring reads: the effects, ln N, and a fit's state
+    search.testable, search.ln_n = (GammaMismatch(),), math.log(4000)
+    search.state_of = lambda r, active: r  # the fits below are states already
+    for cur_rho_s, fit_rho_s, counted in ((0.35, 1.3, False), (0.35, 0.6, True), (1.2, 1.15, True), (1.2, 1.3, False)):
+        fits = [state(4000.0, fit_rho_s, (0, 1, 2))]
+        cand, k = _score_candidate(search, state(4040.0, cur_rho_s), lambda _: math.nan, 0, fits)
+        assert k == 0 and cand.k == 1 and cand.physical is counted
+        assert cand.delta_chi2 == pytest.approx(40.0 if counted else 0.0)
+        assert (cand.delta_bic > 0) is counted
