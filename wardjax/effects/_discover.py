@@ -72,7 +72,7 @@ from ._recheck import VariogramRecheck
 from ._remeasure import TextureRemeasure
 from ._report import Candidate, DiscoveryReport, FitState, Step
 from ._search import _Search, _View
-from ._standard_sigma import widened_report
+from ._standard_sigma import standard_deflated, widened_report
 from ._step_record import flat as _flat
 from ._step_record import make_step, plot_sampler
 from ._texture_term import identity_whitened, with_texture
@@ -160,6 +160,9 @@ class _Steps:
             if read is not None:
                 search, cur, win, summary = read
                 cands = [win if c.effect == win.effect else c for c in cands]  # the model averaging reads it there
+            win = standard_deflated(
+                search, win
+            )  # the smoothed standard's shared noise (wardjax.effects._standard_sigma)
             if not (win.delta_bic > 0 and win.p_value * len(remaining) < alpha):
                 break
             if read is not None:  # the step stands under the new covariance: the model before it too

@@ -41,10 +41,11 @@ import jax.numpy as jnp
 import numpy as np
 
 from . import _exported
-from ._report import FitState
+from ._evidence import _lr_p
+from ._report import Candidate, FitState
 from ._solve import _residual_view, static_key
 
-__all__ = ["lag_form", "widened_report", "with_standard"]
+__all__ = ["lag_form", "standard_deflated", "widened_report", "with_standard"]
 
 
 _STEP = 1e-5  # central differences' step in u (relative above 1): truncation ~10⁻¹⁰, rounding ~10⁻¹¹ of r
@@ -172,3 +173,36 @@ def widened_report(base_search, final_search, baseline: FitState, final: FitStat
         stderr = ev.state.sigma.get(step.effect, step.stderr) if ev.state is not None else step.stderr
         out.append(dataclasses.replace(step, evidence=ev, candidates=cands, stderr=stderr))
     return baseline, final, out
+
+
+def standard_deflated(search, win: Candidate) -> Candidate:
+    """``win`` with its Δχ² divided by the standard's design effect in ΔBIC and the p-value (a first-order Rao–Scott
+    correction, as the texture's between scanlines: :meth:`~wardjax.effects._texture_term.CrossTexture.deflate`).
+
+    The white-noise Δχ² of an effect is ``θ̂ᵀ Σ⁻¹ θ̂`` over its parameters; the standard's low frequencies move
+    ``θ̂`` by more than ``Σ`` says (:func:`with_standard`), so under the null its mean is ``tr(Σ⁻¹ Σ')``, not ``k``:
+    ``D = tr(Σ⁻¹ Σ')/k ≥ 1``. A smooth effect (a per-channel specular scale, an offset, a gradient) is what the
+    standard's shared noise mimics on a dark glossy sample, where ``D`` reaches several.
+    """
+    st = win.state
+    if st is None or getattr(search.data, "standard", None) is None or win.delta_chi2 <= 0:
+        return win
+    idx = [j for j in search.layout.slices.get(win.effect, []) if j in st.free]
+    if not idx:
+        return win
+    nom = np.asarray(st.cov)[np.ix_(idx, idx)]
+    wide = np.asarray(with_standard(search, st).cov)[np.ix_(idx, idx)]
+    try:
+        d = float(np.trace(np.linalg.solve(nom, wide))) / len(idx)
+    except np.linalg.LinAlgError:
+        return win
+    if not np.isfinite(d) or d <= 1.0:
+        return win
+    dchi2 = (win.delta_bic + win.k * search.ln_n) / d  # the Δχ² ΔBIC rests on (the texture's deflation kept)
+    e = next(t for t in search.testable if t.name == win.effect)
+    return dataclasses.replace(
+        win,
+        delta_bic=dchi2 - win.k * search.ln_n,
+        p_value=_lr_p(dchi2, e, win.k),
+        design_effect=win.design_effect * d,
+    )
