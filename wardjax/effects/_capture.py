@@ -37,13 +37,15 @@ Noise
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 
 from ..capture import CAPTURE_FILE, Capture, CaptureError
 from ._floor import floor_biased, floor_fraction
 from ._models import ScanlineData, inv_irradiance, scanline_data
 from ._noise import noise_columns
-from ._standard_noise import standard_noise_share
+from ._standard_noise import bin_lag_correlation, smoothing_factor, standard_noise
 
 __all__ = ["capture_data"]
 
@@ -147,9 +149,15 @@ def capture_data(cap: Capture, *, max_samples: int = 20_000, band_rows: int = 51
     wi, pts = bins.wi[keep], bins.points[keep]
     sigma = _noise_model(F, exact=~cens, w=inv_irradiance(pts, rig.lamp, wi))
     # the smoothed standard's noise, which second differences do not see (wardjax.effects._standard_noise)
-    share = standard_noise_share(cap, bins.b)
+    c = standard_noise(cap)
+    sigma_px = float(cap.config.fit.smooth_standard_px)
+    share = c * smoothing_factor(sigma_px, bins.b) if sigma_px > 0 else np.zeros_like(c)
     sigma = np.sqrt(sigma * sigma + share * np.where(np.isfinite(F), F, 0.0) ** 2)
-    return scanline_data(
+    # ... and which the fitted parameters average over many values: their covariance needs its lags too
+    standard = None
+    if sigma_px > 0 and np.any(c > 0):
+        standard = (c, bin_lag_correlation(sigma_px, bins.b), np.flatnonzero(keep))
+    data = scanline_data(
         F,
         wi,
         bins.wo[keep],
@@ -161,3 +169,4 @@ def capture_data(cap: Capture, *, max_samples: int = 20_000, band_rows: int = 51
         censored=cens,
         camera=rig.camera,
     )
+    return data if standard is None else dataclasses.replace(data, standard=standard)

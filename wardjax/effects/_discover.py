@@ -72,6 +72,7 @@ from ._recheck import VariogramRecheck
 from ._remeasure import TextureRemeasure
 from ._report import Candidate, DiscoveryReport, FitState, Step
 from ._search import _Search, _View
+from ._standard_sigma import standard_deflated, widened_report
 from ._step_record import flat as _flat
 from ._step_record import make_step, plot_sampler
 from ._texture_term import identity_whitened, with_texture
@@ -159,6 +160,9 @@ class _Steps:
             if read is not None:
                 search, cur, win, summary = read
                 cands = [win if c.effect == win.effect else c for c in cands]  # the model averaging reads it there
+            win = standard_deflated(
+                search, win
+            )  # the smoothed standard's shared noise (wardjax.effects._standard_sigma)
             if not (win.delta_bic > 0 and win.p_value * len(remaining) < alpha):
                 break
             if read is not None:  # the step stands under the new covariance: the model before it too
@@ -352,9 +356,8 @@ def discover(
     _check_inputs(model, data, alpha)
     testable, skipped = _split_library(model, data, effects)
     search, cur, tex = _baseline(model, data, testable, lm_steps, chunk, texture)
-    sample = None
-    if keep_plot_data:
-        sample = plot_sampler(search.mask, int(search.mask.sum()) if search.mask is not None else cur.r.size, seed)
+    n_plot = int(search.mask.sum()) if search.mask is not None else cur.r.size
+    sample = plot_sampler(search.mask, n_plot, seed) if keep_plot_data else None
     run = _Steps(cur)
     stopped = run.search(search, max_steps, alpha, min_explained, structure_p, stop_within_noise, sample, progress)
     cur, states, found, steps, partial = run.cur, run.states, run.found, run.steps, run.partial
@@ -363,13 +366,14 @@ def discover(
     within = stopped or _gap_p(st.chi2, st.dof) >= structure_p or run.final_within(structure_p)
     r_flat, covs = _flat(cur.r.reshape(np.shape(cur.pred)), mask), {k: _flat(x, mask) for k, x in cur.covs.items()}
     unexplained, structure = unexplained_structure(r_flat, covs, st, partial, structure_p, within)
+    base_st, final_st, steps = widened_report(search, run.cur_search or search, states[0], cur.state, steps)
     return DiscoveryReport(
         model=getattr(model, "title", type(model).__name__),
         model_kind=model.kind,
         n_obs=search.n_obs,
         n_profiled=search.n_prof,
-        baseline=states[0],
-        final=cur.state,
+        baseline=base_st,
+        final=final_st,
         found=found,
         gap=[s.gap for s in states],
         steps=steps,

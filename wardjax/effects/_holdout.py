@@ -67,6 +67,7 @@ __all__ = ["HOLDOUT_SHARE", "Holdout", "HoldoutRead"]
 
 HOLDOUT_SHARE = 0.25  # the held-out gain a winner needs, as a fraction of its in-sample Δχ²
 _MIN_SCANLINES = 8  # each half at least this many scanlines with data; each block of a fold too
+_PIN_RATIO = 4.0  # the folds read the effect alike where each pins its θ this well: tr(Σ_A Σ_B⁻¹)/k either way
 _MAX_PAIRS = 3  # a fold is at most this many blocks, alternating with the other fold's
 
 
@@ -134,26 +135,45 @@ class Holdout:
     @staticmethod
     def _train(search, st: FitState, anchor):
         r = search.fit([(st.u, list(st.free), st.active, anchor)])[0]
-        return search.refine(r, st.active)[0]
+        return search.refine(r, st.active)
 
     def __call__(self, cur: FitState, new: FitState, dchi2: float) -> HoldoutRead | None:
         """The hold-out read of ``new`` (the model with the winner) against ``cur``; ``None`` if a fit fails.
 
-        Inconclusive (and then no veto) where a fold cannot pin the model the effect is added to: the current
-        model refitted on that fold loses more χ² on the other fold, against the current model fitted on all the
-        data, than the winner's whole in-sample Δχ² (a fold without the scanlines nearest the stripline cannot pin
-        a narrow lobe; what the two folds' refits then predict differs by the lobe's misfit, not by the effect).
+        The winner's own parameters ``θ`` are fitted on one fold ``A`` and *held* on the other, ``B``, where the
+        current model's parameters are refitted in both models: ``B`` pins its own lobe, so the read does not
+        depend on how well one fold extrapolates the lobe to the other. The direction's gain
+        ``χ²_B(current) − χ²_B(winner, θ_A)`` is at most ``Δχ²_B``, the winner's in-sample Δχ² on ``B`` alone,
+        and for noise its mean is ``−tr(Σ_A Σ_B⁻¹)`` (``Σ`` the folds' covariances of ``θ``). The winner passes
+        where the gain over both directions is positive and at least ``HOLDOUT_SHARE`` of ``Σ Δχ²_B``. Where one
+        fold pins ``θ`` far worse than the other (``tr(Σ_A Σ_B⁻¹)`` above ``_PIN_RATIO`` per parameter either
+        way: the effect's signature lies where one fold has no scanlines) that fold can neither teach nor test
+        it: the read is *inconclusive* (``lost`` holds that ratio) and vetoes nothing.
         """
-        gain, lost = 0.0, 0.0
-        for train, test in self._folds:
-            anchor = train.layout.u_initial()
-            u_cur, u_new = self._train(train, cur, anchor), self._train(train, new, anchor)
-            c_cur = self._chi2_at(test, cur, u_cur)
-            g = c_cur - self._chi2_at(test, new, u_new)
-            if not math.isfinite(g):
+        own = [j for j in new.free if j not in set(cur.free)]  # the winner's parameters
+        fits = []
+        for train, _ in self._folds:  # the winner fitted on each fold alone, with its θ's covariance there
+            r = self._train(train, new, train.layout.u_initial())
+            cov = np.asarray(train.state_of(r, new.active).cov)[np.ix_(own, own)]
+            fits.append((np.asarray(r[0]), cov))
+        try:
+            c0, c1 = fits[0][1], fits[1][1]
+            ratio = max(float(np.trace(np.linalg.solve(c1, c0))), float(np.trace(np.linalg.solve(c0, c1))))
+        except np.linalg.LinAlgError:
+            ratio = math.inf
+        if not ratio <= _PIN_RATIO * len(own):  # one fold barely sees the effect: it can neither teach nor test it
+            return HoldoutRead(math.nan, math.nan, True, True, ratio)
+        gain, base = 0.0, 0.0
+        for (_, test), (u_a, _), (u_b, _) in zip(self._folds, fits, fits[::-1]):
+            anchor = test.layout.u_initial()
+            u0 = np.array(new.u, copy=True)
+            u0[own] = u_a[own]
+            held = dataclasses.replace(new, u=u0, free=tuple(j for j in new.free if j not in own))
+            c_cur = self._chi2_at(test, cur, self._train(test, cur, anchor)[0])
+            g = c_cur - self._chi2_at(test, new, self._train(test, held, anchor)[0])
+            d_b = c_cur - self._chi2_at(test, new, u_b)
+            if not (math.isfinite(g) and math.isfinite(d_b)):
                 return None
-            gain += g
-            lost = max(lost, c_cur - self._chi2_at(test, cur, cur.u))
-        share = gain / max(dchi2, 1e-300)
-        inconclusive = bool(lost > dchi2)
-        return HoldoutRead(gain, share, inconclusive or bool(gain > 0 and share >= HOLDOUT_SHARE), inconclusive, lost)
+            gain, base = gain + g, base + max(d_b, 0.0)
+        share = gain / max(base, 1e-300)
+        return HoldoutRead(gain, share, bool(gain > 0 and share >= HOLDOUT_SHARE))

@@ -91,6 +91,12 @@ class ScanlineData(eqx.Module):
         ``P ℓ``, ``ℓ = ρd a`` the scanlines' relative levels (``P`` ``(S, S)``,
         ``n`` non-zero rows of rank ``n − 1``: that many more observations;
         ``a`` ``(C,)``). All zeros: the same compiled program, no term.
+    standard
+        ``(c, R, columns)`` or ``None``: the smoothed reflectance standard's
+        relative noise per channel ``c`` ``(C,)``, its correlation ``R`` at bin
+        lags and each scanline's bin column ``(S,)``
+        (:mod:`~wardjax.effects._standard_noise`); read only by the fitted
+        parameters' covariance (:mod:`~wardjax.effects._standard_sigma`).
     """
 
     y: np.ndarray
@@ -102,6 +108,7 @@ class ScanlineData(eqx.Module):
     censored: np.ndarray | None = None
     whiten: np.ndarray | None = None
     levels: tuple | None = None
+    standard: tuple | None = None
     kind: str = eqx.field(static=True, default="ratio")
     f_std: float = eqx.field(static=True, default=0.99 / np.pi)
     available: tuple = eqx.field(static=True, default=())

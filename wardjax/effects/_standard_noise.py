@@ -21,6 +21,20 @@ The estimate
     ``c Σ K_b²``, ``K_b`` the smoothing kernel averaged over the bin (the
     mirror mapping taken as one standard pixel per probe pixel), added to the
     noise variance as ``c Σ K_b² f²``.
+
+Between values
+    The smoothed noise is shared by neighbouring bins, along the scanline and
+    across scanlines (the standard is smoothed in two dimensions, and the
+    mirror points of neighbouring image columns are neighbouring columns of the
+    standard). The relative errors of two bins ``Δ = (Δs, Δn)`` bins apart
+    correlate as ``c R(Δ)``, ``R(Δ) = Σ_p K_b(p) K_b(p + b Δ)`` the kernel's
+    autocorrelation at the bins' pixel offset (:func:`bin_lag_correlation`;
+    ``R(0) = Σ K_b²``). Summed over every lag, ``Σ R = 1/b²``: smoothing
+    removes none of the noise's low frequencies, which is what a parameter
+    fitted over many bins averages, so a per-value term alone (``R(0)``)
+    understates the parameters' variance by up to ``1/(b² R(0))`` (28 at
+    ``b = 1``, 7.9 at ``b = 2``, σ = 1.5 px). :mod:`wardjax.effects._standard_sigma`
+    adds the lags to the fitted parameters' covariance.
 """
 
 from __future__ import annotations
@@ -30,7 +44,7 @@ import math
 
 import numpy as np
 
-__all__ = ["standard_noise_share"]
+__all__ = ["bin_lag_correlation", "standard_noise", "standard_noise_share"]
 
 _CHI2_1_MEDIAN = 0.454936
 
@@ -44,6 +58,26 @@ def smoothing_factor(sigma_px: float, b: int) -> float:
     img[n // 2, n // 2] = 1.0
     k = uniform_filter(gaussian_filter(img, sigma_px, mode="constant"), size=b, mode="constant")
     return float(np.sum(k * k))
+
+
+def bin_lag_correlation(sigma_px: float, b: int) -> np.ndarray:
+    """``R(Δ)`` ``(2L + 1, 2L + 1)``: the smoothed, ``b × b``-binned kernel's autocorrelation at bin lags
+    ``Δ = (Δs, Δn)`` (centre: ``Δ = 0``, equal to :func:`smoothing_factor`), out to where it falls below 10⁻⁶ of it."""
+    from scipy.ndimage import gaussian_filter, uniform_filter
+    from scipy.signal import fftconvolve
+
+    n = 2 * math.ceil(4 * sigma_px) + 2 * b + 3
+    img = np.zeros((n, n))
+    img[n // 2, n // 2] = 1.0
+    k = uniform_filter(gaussian_filter(img, sigma_px, mode="constant"), size=b, mode="constant")
+    auto = fftconvolve(k, k[::-1, ::-1], mode="full")  # Σ_p k(p) k(p + d) at pixel offsets d; centre at n − 1
+    reach = (n - 1) // b
+    idx = n - 1 + b * np.arange(-reach, reach + 1)
+    r = auto[np.ix_(idx, idx)]
+    keep = np.flatnonzero(np.max(np.abs(r), axis=0) > 1e-6 * r[reach, reach])
+    lag = int(np.max(np.abs(keep - reach))) if keep.size else 0
+    out = r[reach - lag : reach + lag + 1, reach - lag : reach + lag + 1]
+    return 0.5 * (out + out.T)
 
 
 def _relative_noise(v: np.ndarray) -> np.ndarray:
@@ -65,10 +99,19 @@ def _relative_noise(v: np.ndarray) -> np.ndarray:
 
 
 def standard_noise_share(cap, b: int) -> np.ndarray:
-    """``(C,)``: the relative variance the smoothed standard adds to a ``b × b`` bin's BRDF value, ``σ² += share f²``.
+    """``(C,)``: the relative variance the smoothed standard adds to a ``b × b`` bin's BRDF value (see
+    :func:`standard_noise`)."""
+    c = standard_noise(cap)
+    sigma_px = float(cap.config.fit.smooth_standard_px)
+    return c * smoothing_factor(sigma_px, b) if sigma_px > 0 else np.zeros(3)
+
+
+def standard_noise(cap) -> np.ndarray:
+    """``c`` ``(C,)``: the standard's relative noise variance per raw pixel (the module's estimate).
 
     Zero where the standard is not smoothed: its noise is then white along
-    the scanline, and the second differences count it.
+    the scanline, and the second differences count it; the bin's share is
+    ``c Σ K_b²``, ``σ² += share f²``.
     """
     from ..reconstruct import prepare_bands
 
@@ -84,4 +127,4 @@ def standard_noise_share(cap, b: int) -> np.ndarray:
     std = np.asarray(setup.kernel["std"], float)[:h, :w]
     v = std[..., 0:3] - std[..., 3:6]
     v = np.where(std[..., 6:9] > 0, np.nan, v)  # clipped pixels
-    return _relative_noise(v) * smoothing_factor(sigma_px, b)
+    return _relative_noise(v)

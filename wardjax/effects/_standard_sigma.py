@@ -1,0 +1,208 @@
+"""The smoothed standard's noise in the fitted parameters' covariance: the lags the per-value σ cannot hold.
+
+Why
+    Every probe value is divided by the reflectance standard at its mirror
+    point, smoothed first, so the standard's noise reaches the values as a
+    relative error ``δy_i = f_i ε_i`` with ``Cov(ε_i, ε_j) = c R(Δ_ij)``
+    (:mod:`~wardjax.effects._standard_noise`: ``c`` per channel, ``R`` the
+    smoothed, binned kernel's autocorrelation at the bins' lag ``Δ`` along and
+    across the scanlines). The noise model holds its per-value share
+    ``c R(0) f²``, which keeps the gap right; but smoothing keeps the noise's
+    low frequencies (``Σ_Δ R = 1/b²`` against ``R(0)``), and a parameter
+    fitted over many values averages exactly those. On a dark glossy sample,
+    where the standard is much dimmer than the highlight and its noise
+    dominates there, α's σ read ~2.4× too small without the lags.
+
+The sandwich
+    A fit's covariance is ``H⁻¹`` (``H = JᵀJ``, ``J`` the whitened residuals'
+    Jacobian with ρd profiled). A perturbation ``δ`` of the values moves the
+    whitened residuals by ``W (δ/σ)`` (``W`` the texture's whitening, ``I``
+    under white noise) and the estimate by ``−H⁻¹ Jᵀ W (δ/σ)`` (the profile's
+    projection is idempotent, so the profiled ``J`` already carries it). With
+    ``A = (Wᵀ J H⁻¹) · f/σ`` the lags add (White 1980's sandwich over the
+    covariance the fit did not assume)
+
+        ΔCov = c Σ_{Δ ≠ 0 in lags} R(Δ) Σ_i A_i A_{i+Δ}ᵀ      per channel, summed over channels.
+
+    Under white noise every lag but ``Δ = 0`` is added. Where the texture is
+    carried, its covariance was measured along each scanline on residuals
+    that hold the standard's noise too, so only the lags across scanlines
+    (``Δs ≠ 0``) are added. The scanlines' levels term, where present, enters
+    ``H`` as fitted; its rows are not perturbed (a second-order share).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from . import _exported
+from ._evidence import _lr_p
+from ._report import Candidate, FitState
+from ._solve import _residual_view, static_key
+
+__all__ = ["lag_form", "standard_deflated", "widened_report", "with_standard"]
+
+
+_STEP = 1e-5  # central differences' step in u (relative above 1): truncation ~10⁻¹⁰, rounding ~10⁻¹¹ of r
+
+
+def _residuals(search, u, act) -> np.ndarray:
+    """The whitened values' residuals ``(S N C,)`` (ρd profiled) at ``u``: the run's compiled residual program."""
+    static = dict(model=search.model, effects=search.testable, layout_key=search.layout.key)
+    with jax.enable_x64(True):
+        fn = functools.partial(_residual_view, **static)
+        r = _exported.call("residual_view", fn, static_key(static), (jnp.asarray(u), jnp.asarray(act), search.data_dev))
+    return np.asarray(r[0], np.float64)
+
+
+def _jacobian(search, st) -> np.ndarray:
+    """``∂r/∂u`` ``(S N C, K)`` of the whitened values' residuals against ``st``'s free parameters.
+
+    Central differences through the residual program every run has already
+    compiled (:func:`~wardjax.effects._solve._residual_view`), ``2K`` calls:
+    a variance term needs a few digits, and a program of its own (``jacfwd``
+    of the model with every effect behind a switch) compiled in about half
+    the Levenberg–Marquardt program's time, on every cold ``diagnose``.
+    """
+    act = np.array([i in st.active for i in range(len(search.testable))], bool)
+    u0 = np.asarray(st.u, np.float64)
+    cols = []
+    for j in st.free:
+        h = _STEP * max(1.0, abs(float(u0[j])))
+        up, dn = u0.copy(), u0.copy()
+        up[j] += h
+        dn[j] -= h
+        cols.append((_residuals(search, up, act) - _residuals(search, dn, act)) / (2.0 * h))
+    return np.stack(cols, -1)
+
+
+def _back_whitened(W: np.ndarray, cols: np.ndarray) -> np.ndarray:
+    """``Wᵀ`` along each scanline of ``cols`` ``(S, N, C, K)``; ``W`` ``(S, C N, C N)`` or ``(S, C, N, N)``."""
+    if W.ndim == 4:
+        return np.einsum("scji,sjck->sick", W, cols)
+    s_n, n, c_n, k = cols.shape
+    flat = np.swapaxes(cols, 1, 2).reshape(s_n, c_n * n, k)
+    return np.swapaxes(np.einsum("sji,sjk->sik", W, flat).reshape(s_n, c_n, n, k), 1, 2)
+
+
+def _is_identity(W: np.ndarray) -> bool:
+    return W.ndim == 3 and bool(np.array_equal(W, np.broadcast_to(np.eye(W.shape[-1]), W.shape)))
+
+
+def lag_form(a: np.ndarray, c: np.ndarray, R: np.ndarray, columns: np.ndarray, across_only: bool) -> np.ndarray:
+    """``Σ_ch c_ch Σ_{Δ ≠ 0} R(Δ) Σ_i a_i a_{i+Δ}ᵀ`` ``(K, K)`` for ``a`` ``(S, N, C, K)`` on the bin grid.
+
+    ``R`` ``(2L + 1, 2L + 1)`` indexed ``[Δs, Δn]`` (centre ``Δ = 0``); scanline ``s`` is bin column
+    ``columns[s]``; ``across_only`` keeps the lags with ``Δs ≠ 0``.
+    """
+    s_n, n, c_n, k = a.shape
+    lag = R.shape[0] // 2
+    grid = np.zeros((int(columns.max()) + 1 + 2 * lag, n + 2 * lag, c_n, k))
+    grid[lag + columns, lag : lag + n] = a * np.sqrt(np.asarray(c, float))[None, None, :, None]
+    core = grid[lag : -lag or None, lag : -lag or None]
+    out = np.zeros((k, k))
+    for ds in range(-lag, lag + 1):
+        for dn in range(-lag, lag + 1):
+            if (ds == 0 and (dn == 0 or across_only)) or R[lag + ds, lag + dn] == 0.0:
+                continue
+            shifted = grid[lag + ds : lag + ds + core.shape[0], lag + dn : lag + dn + n]
+            out += R[lag + ds, lag + dn] * np.einsum("sncj,snck->jk", core, shifted)
+    return 0.5 * (out + out.T)
+
+
+def with_standard(search, st: FitState) -> FitState:
+    """``st`` (a :class:`~wardjax.effects._report.FitState` fitted under ``search``) with the smoothed standard's
+    lags in its covariance and σ; ``st`` itself where the data carry no standard's noise."""
+    std = getattr(search.data, "standard", None)
+    if std is None or not st.free or getattr(search.model, "kind", None) != "scanline":
+        return st
+    c, R, columns = (np.asarray(x) for x in std)
+    free = list(st.free)
+    cov_b = np.asarray(st.cov)[np.ix_(free, free)]
+    if not np.all(np.isfinite(cov_b)):
+        return st
+    data = search.data
+    y, sig, mask = (np.asarray(x) for x in (data.y, data.sigma, data.mask))
+    G = (_jacobian(search, st) @ cov_b).reshape(*y.shape, len(free))
+    W = getattr(data, "whiten", None)
+    textured = W is not None and not _is_identity(np.asarray(W))
+    if W is not None and textured:
+        G = _back_whitened(np.asarray(W), G)
+    a = G * np.where(mask, y / sig, 0.0)[..., None]
+    cov = np.array(st.cov, copy=True)
+    cov[np.ix_(free, free)] = cov_b + lag_form(a, c, R, columns, across_only=textured)
+    return dataclasses.replace(st, cov=cov, sigma=search.layout.sigma(st.u, cov))
+
+
+def widened_report(base_search, final_search, baseline: FitState, final: FitState, steps: list):
+    """The states a report reads σ from, with the smoothed standard's noise shared between values in their σ
+    (:func:`with_standard`): ``(baseline, final, steps)``.
+
+    The baseline under the search it was fitted in; the final model, every step's winner and the last step's
+    candidates that enter the model average (:func:`~wardjax.effects._averaging.model_averaged`) under the final
+    search (an earlier step's texture covariance differs from it by a re-measurement).
+    """
+    if getattr(base_search.data, "standard", None) is None:
+        return baseline, final, steps
+    done: dict[int, FitState] = {}
+
+    def widen(search, st: FitState) -> FitState:
+        if id(st) not in done:
+            done[id(st)] = with_standard(search, st)
+        return done[id(st)]
+
+    baseline = widen(base_search, baseline)
+    final = widen(final_search, final)
+    out = []
+    for i, step in enumerate(steps):
+        st = step.evidence.state
+        ev = step.evidence if st is None else dataclasses.replace(step.evidence, state=widen(final_search, st))
+        cands = step.candidates
+        if i == len(steps) - 1:
+            cands = [
+                dataclasses.replace(c, state=widen(final_search, c.state))
+                if c.state is not None and c.physical and c.delta_bic > 0
+                else c
+                for c in cands
+            ]
+        stderr = ev.state.sigma.get(step.effect, step.stderr) if ev.state is not None else step.stderr
+        out.append(dataclasses.replace(step, evidence=ev, candidates=cands, stderr=stderr))
+    return baseline, final, out
+
+
+def standard_deflated(search, win: Candidate) -> Candidate:
+    """``win`` with its Δχ² divided by the standard's design effect in ΔBIC and the p-value (a first-order Rao–Scott
+    correction, as the texture's between scanlines: :meth:`~wardjax.effects._texture_term.CrossTexture.deflate`).
+
+    The white-noise Δχ² of an effect is ``θ̂ᵀ Σ⁻¹ θ̂`` over its parameters; the standard's low frequencies move
+    ``θ̂`` by more than ``Σ`` says (:func:`with_standard`), so under the null its mean is ``tr(Σ⁻¹ Σ')``, not ``k``:
+    ``D = tr(Σ⁻¹ Σ')/k ≥ 1``. A smooth effect (a per-channel specular scale, an offset, a gradient) is what the
+    standard's shared noise mimics on a dark glossy sample, where ``D`` reaches several.
+    """
+    st = win.state
+    if st is None or getattr(search.data, "standard", None) is None or win.delta_chi2 <= 0:
+        return win
+    idx = [j for j in search.layout.slices.get(win.effect, []) if j in st.free]
+    if not idx:
+        return win
+    nom = np.asarray(st.cov)[np.ix_(idx, idx)]
+    wide = np.asarray(with_standard(search, st).cov)[np.ix_(idx, idx)]
+    try:
+        d = float(np.trace(np.linalg.solve(nom, wide))) / len(idx)
+    except np.linalg.LinAlgError:
+        return win
+    if not np.isfinite(d) or d <= 1.0:
+        return win
+    dchi2 = (win.delta_bic + win.k * search.ln_n) / d  # the Δχ² ΔBIC rests on (the texture's deflation kept)
+    e = next(t for t in search.testable if t.name == win.effect)
+    return dataclasses.replace(
+        win,
+        delta_bic=dchi2 - win.k * search.ln_n,
+        p_value=_lr_p(dchi2, e, win.k),
+        design_effect=win.design_effect * d,
+    )
