@@ -12,13 +12,6 @@ import os
 import shutil
 import tempfile
 
-# The suite compiles many more programs than it runs for long (compiling is over half its CPU time):
-# XLA's CPU backend is asked for less code optimisation, unless the caller chose a level. The programs
-# and their arithmetic are the same (XLA enables no fast-math at any level); the suite takes about a
-# fifth less CPU. Set before JAX starts its backend.
-if "xla_backend_optimization_level" not in os.environ.get("XLA_FLAGS", ""):
-    os.environ["XLA_FLAGS"] = (os.environ.get("XLA_FLAGS", "") + " --xla_backend_optimization_level=0").strip()
-
 import jax
 import numpy as np
 import pytest
