@@ -160,9 +160,8 @@ class _Steps:
             if read is not None:
                 search, cur, win, summary = read
                 cands = [win if c.effect == win.effect else c for c in cands]  # the model averaging reads it there
-            win = standard_deflated(
-                search, win
-            )  # the smoothed standard's shared noise (wardjax.effects._standard_sigma)
+            # the smoothed standard's shared noise (wardjax.effects._standard_sigma)
+            win = standard_deflated(search, win)
             if not (win.delta_bic > 0 and win.p_value * len(remaining) < alpha):
                 break
             if read is not None:  # the step stands under the new covariance: the model before it too
