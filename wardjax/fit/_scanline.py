@@ -450,25 +450,28 @@ def _solve(
         spans = [(a, b, -(-rows // len(devices)) * len(devices)) for a, b, rows in buckets(n_rows, chunk)]
         small = solver == "fast" and _small_programs(n_pad, devices)
         signs = []
-        for (start, stop, rows), args in zip(spans, _feed.chunks(data, spans, put, threaded=host_fed)):
+        streams = _feed.streams(devices)  # on a CPU, chunks on all cores at once
+        chunks = _feed.chunks(data, spans, put, threaded=host_fed)
+        for i, ((start, stop, rows), args) in enumerate(zip(spans, chunks)):
             if host_fed and args[4] is not None:
                 signs.append(negative_flag(args[4]))  # validate left host weights' sign to the device
-            if solver == "fast":
-                out = _fast_chunk(
-                    *args,
-                    n=n,
-                    iso=iso,
-                    rtol=rtol,
-                    normalization=normalization,
-                    dtype=dtype,
-                    check=check,
-                    sandwich=sandwich,
-                    steps=steps,
-                    lanes=_profile_lanes(rows, n_pad) if profile_here else 0,
-                    small=small,
-                )
-            else:
-                out = _optimistix_chunk(*clean(*args, dtype=dtype), normalization=normalization)
+            with _feed.stream(i, streams):
+                if solver == "fast":
+                    out = _fast_chunk(
+                        *args,
+                        n=n,
+                        iso=iso,
+                        rtol=rtol,
+                        normalization=normalization,
+                        dtype=dtype,
+                        check=check,
+                        sandwich=sandwich,
+                        steps=steps,
+                        lanes=_profile_lanes(rows, n_pad) if profile_here else 0,
+                        small=small,
+                    )
+                else:
+                    out = _optimistix_chunk(*clean(*args, dtype=dtype), normalization=normalization)
             pieces.append((out, start, stop))  # dispatched asynchronously
         check_sign(signs)
         return _to_host(pieces, n_rows, sandwich=sandwich and solver == "fast", every_gn=every_gn)
