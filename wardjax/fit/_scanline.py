@@ -338,7 +338,7 @@ def fit_scanlines(
     sandwich = weights is None and errors != "gauss_newton" and solver == "fast"
     sol = _solve(data, dtype=dtype, chunk=chunk, check=check, sandwich=sandwich, steps=_steps(max_steps), **kw)
     if dtype == np.float32 and solver == "fast":
-        _refit_uncertified(sol, data, check=check, sandwich=sandwich, **kw)
+        sol = _refit_uncertified(sol, data, check=check, sandwich=sandwich, **kw)
     if solver == "fast" and iso and errors != "gauss_newton":
         if errors == "profile":
             sol.nonlinear[sol.status == Status.CONVERGED] = _profile.PENDING
@@ -351,8 +351,8 @@ def fit_scanlines(
 # What a padded sample of each input of ``data = (f, wi, wo, mask, weights)`` holds: unusable, weight 0.
 
 
-def _refit_uncertified(sol: _varpro.ScanlineSolution, data, *, devices, **kw) -> None:
-    """Fit again in float64, in place, the float32 fits that are not certified.
+def _refit_uncertified(sol: _varpro.ScanlineSolution, data, *, devices, **kw) -> _varpro.ScanlineSolution:
+    """``sol`` with the float32 fits that are not certified fitted again in float64 (in place).
 
     Rounding can cancel the algebraic centring into a spurious optimum (~3 in 10⁴ scanlines with
     broad lobes): those rows (status ``max_steps`` or ``nonfinite``) take float64's results, profiled
@@ -360,11 +360,14 @@ def _refit_uncertified(sol: _varpro.ScanlineSolution, data, *, devices, **kw) ->
     """
     redo = np.flatnonzero(np.isin(sol.status, (Status.MAX_STEPS, Status.NONFINITE)))
     if redo.size:
+        if not np.asarray(sol.cov_gn).flags.writeable:  # no row was pending (see _to_host): now some may be
+            sol = sol._replace(cov_gn=np.array(sol.cov_gn))
         sub = tuple(None if a is None else a[redo] for a in data)
         f64 = np.dtype(np.float64)
         again = _solve(sub, dtype=f64, chunk=_default_chunk(f64, devices), devices=devices, **kw)
         for full, part in zip(sol, again):
             full[redo] = part
+    return sol
 
 
 def _check_devices(devices) -> list:
@@ -497,6 +500,9 @@ def _to_host(
     with ``every_gn``), NaN elsewhere: on an accelerator the results' copy, not the fit, bounds small
     problems. ``local``: the results are in host memory already (a CPU device); NumPy reads them in
     place, without :func:`jax.device_get`'s per-array machinery (a third of the host's share of a chunk).
+    Where no row is pending (the search program profiled every row that failed the check), ``cov_gn``
+    is a read-only NaN broadcast: filling 200 bytes a row of fresh memory cost the host a third of its
+    CPU time at 10⁶ rows.
     """
     first = pieces[0][0]
     skip = () if sandwich and every_gn else ("cov_gn",)
@@ -511,9 +517,12 @@ def _to_host(
         return made(**host)
     if not sandwich:
         return made(**host, cov_gn=host["cov"])
+    pending = host["nonlinear"] == _profile.PENDING
+    if not pending.any():
+        return made(**host, cov_gn=np.broadcast_to(np.float64(np.nan), host["cov"].shape))
     cov_gn = np.full_like(host["cov"], np.nan)
     for out, start, stop in pieces:
-        at = np.flatnonzero(host["nonlinear"][start:stop] == _profile.PENDING)
+        at = np.flatnonzero(pending[start:stop])
         if at.size:
             cov_gn[start + at] = np.asarray(out.cov_gn)[at] if local else np.asarray(out.cov_gn[jnp.asarray(at)])
     return made(**host, cov_gn=cov_gn)
