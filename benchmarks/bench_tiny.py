@@ -5,11 +5,13 @@ Each problem is one of :func:`benchmarks.bench_fit.draw_scanlines`' scanlines wi
 flash or multi-view capture see one pixel's lobe), RGB, 1 % multiplicative noise, α 0.03–0.3,
 no weights. Printed side by side in one run: ``fit_scanlines`` with its defaults
 (``errors="auto"``: HC3 sandwich, the curvature check, profiles where it fails) and with
-``errors="gauss_newton"`` (best of three after compiling), SciPy ``least_squares(method="lm")``
+``errors="gauss_newton"`` (best of five after compiling), SciPy ``least_squares(method="lm")``
 with the analytic Jacobian on the first ``--scipy`` problems, the ratios, the time 10⁶ problems
-would take at the measured rate, and the robust SD of (fit − truth)/σ of α and ρs. Then where one
-chunk's time goes: the CPU time of each compiled stage (geometry, moments, the search alone, and with
-the curvature check, the sandwich and the in-program profiles added).
+would take at the measured rate, the process's CPU time per fit and its ratio to the wall time of
+the same run (the cores in use: the chunks run on one execution stream per core), and the robust SD
+of (fit − truth)/σ of α and ρs. Then where one chunk's time goes (a chunk of the default size): the
+CPU time of each compiled stage (geometry, moments, the search alone, and with the curvature check,
+the sandwich and the in-program profiles added).
 
 Run: ``python -m benchmarks.bench_tiny [--n 100000] [--k 9] [--scipy 300]`` (under a minute on
 two cores).
@@ -18,6 +20,7 @@ two cores).
 from __future__ import annotations
 
 import argparse
+import os
 import time
 
 import jax
@@ -25,18 +28,33 @@ import jax.numpy as jnp
 import numpy as np
 
 import wardjax as wj
-from wardjax.fit import _data, _scanline
+from wardjax.fit import _data, _feed, _scanline
 
-from .bench_fit import REPEATS, _best_of, draw_scanlines, scipy_fit, z_sd
+from .bench_fit import REPEATS, draw_scanlines, scipy_fit, z_sd
 
 SPAN = (1.5, 4.0)  # half-width of the samples around the highlight, in α (half-vector slope)
+
+
+def _best_of(k: int, fn):
+    """Best wall time of ``k`` calls of ``fn``, the process CPU time of that call, and its result."""
+    best, cpu, out = float("inf"), float("nan"), None
+    for _ in range(k):
+        t0, c0 = time.perf_counter(), time.process_time()
+        out = fn()
+        wall = time.perf_counter() - t0
+        if wall < best:
+            best, cpu = wall, time.process_time() - c0
+    return best, cpu, out
 
 
 def bench_tiny(n: int, k: int, scipy_n: int) -> None:
     d = draw_scanlines(n, (0.03, 0.3), n=k, span=SPAN, seed=7)
     print(f"{n:,} problems of {k} RGB samples (1 % multiplicative noise, no weights); SciPy on the first {scipy_n}")
-    print("| errors | fits/s | 10⁶ fits | × SciPy analytic | σ reported | z-SD α / ρs | converged |")
-    print("| --- | --- | --- | --- | --- | --- | --- |")
+    rows = _scanline._default_chunk(np.float64, jax.devices(), _scanline._sample_bucket(k))
+    print(f"chunks of {rows:,} rows on {_feed.streams(jax.devices())} execution stream(s)")
+    print("| errors | fits/s | 10⁶ fits | CPU µs/fit | CPU/wall | × SciPy analytic | σ reported | z-SD α / ρs", end="")
+    print(" | converged |")
+    print("| --- | --- | --- | --- | --- | --- | --- | --- | --- |")
     m = min(scipy_n, n)
     t0 = time.perf_counter()
     for i in range(m):
@@ -45,17 +63,18 @@ def bench_tiny(n: int, k: int, scipy_n: int) -> None:
     for errors in ("auto", "gauss_newton"):
         fit = lambda errors=errors: wj.fit_scanlines(d.f_r, d.wi, d.wo, errors=errors)
         fit()  # compile
-        el, res = _best_of(REPEATS, fit)
+        el, cpu, res = _best_of(REPEATS, fit)
         kinds, counts = np.unique(res.errors[res.ok], return_counts=True)
         used = ", ".join(f"{a} {c / max(res.ok.sum(), 1):.0%}" for a, c in zip(kinds, counts))
         za, zs = z_sd(res, d)
         rate = n / el
         print(
-            f"| {errors} | {rate:,.0f} | {1e6 / rate:.2f} s | {rate / scipy_rate:,.0f} | {used} | "
+            f"| {errors} | {rate:,.0f} | {1e6 / rate:.2f} s | {1e6 * cpu / n:.2f} | {cpu / el:.2f} | "
+            f"{rate / scipy_rate:,.0f} | {used} | "
             f"{za:.2f} / {zs:.2f} | {res.ok.mean():.1%} |",
             flush=True,
         )
-    print(f"| SciPy LM, analytic Jacobian | {scipy_rate:,.0f} | {1e6 / scipy_rate:,.0f} s | 1 | | | |")
+    print(f"| SciPy LM, analytic Jacobian | {scipy_rate:,.0f} | {1e6 / scipy_rate:,.0f} s | | | 1 | | | |")
 
 
 def _cpu_ms(fn, repeats: int = 2 * REPEATS) -> float:
@@ -69,8 +88,10 @@ def _cpu_ms(fn, repeats: int = 2 * REPEATS) -> float:
     return 1e3 * best
 
 
-def stages(k: int, rows: int = 1024) -> None:
-    """Where a chunk's time goes: CPU ms of each compiled stage of one chunk of ``rows`` problems."""
+def stages(k: int, rows: int | None = None) -> None:
+    """Where a chunk's time goes: CPU ms of each compiled stage of one chunk of ``rows`` problems (default:
+    the rows of a chunk of ``fit_scanlines``)."""
+    rows = rows or _scanline._default_chunk(np.float64, jax.devices(), _scanline._sample_bucket(k))
     d = draw_scanlines(rows, (0.03, 0.3), n=k, span=SPAN, seed=7)
     with jax.enable_x64(True):
         f64 = np.dtype(np.float64)
@@ -110,7 +131,7 @@ def main(argv=None):
     ap.add_argument("--scipy", type=int, default=300, help="problems SciPy fits")
     ap.add_argument("--no-stages", action="store_true", help="skip the per-stage breakdown of one chunk")
     args = ap.parse_args(argv if argv is not None else [])
-    print(f"JAX {jax.__version__} on {jax.devices()[0].platform}")
+    print(f"JAX {jax.__version__} on {jax.devices()[0].platform} ({os.cpu_count()} cores)")
     bench_tiny(args.n, args.k, args.scipy)
     if not args.no_stages:
         stages(args.k)

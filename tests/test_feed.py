@@ -5,9 +5,13 @@ compute (:mod:`wardjax.fit._feed`); on a CPU the compiled call takes them as the
 threaded feed is forced here on the CPU (the suite never needs an accelerator) and must return the
 same numbers bit for bit, with a short last chunk padded, unweighted (the sandwich, Gauss–Newton's
 covariance fetched only where the profile reads it) and weighted, with every row profiled too.
+On a CPU the chunks take turns over execution streams (one per core) and run concurrently: the
+results must be those of one stream, bit for bit.
 """
 
 from __future__ import annotations
+
+import os
 
 import jax
 import numpy as np
@@ -89,3 +93,33 @@ def test_negative_host_weights_refused_after_the_device_check(data, monkeypatch)
     w[120, 5] = -1.0  # in the last chunk: every chunk's flag is read
     with pytest.raises(ValueError, match="weights must be non-negative"):
         wj.fit_scanlines(data.f_r, data.wi, data.wo, weights=w, chunk_size=64, errors="gauss_newton")
+
+
+def _identical(a, b):
+    for name, value in _fields(a).items():
+        np.testing.assert_array_equal(_fields(b)[name], value, err_msg=name)
+
+
+@pytest.mark.parametrize("errors", ["auto", "gauss_newton"])
+def test_chunks_on_several_streams_give_the_one_stream_fit(data, monkeypatch, errors):
+    fit = lambda: wj.fit_scanlines(data.f_r, data.wi, data.wo, chunk_size=32, errors=errors)  # 5 chunks
+    monkeypatch.setattr(_feed, "streams", lambda devices: 1)
+    one = fit()
+    used, stream = [], _feed.stream
+    monkeypatch.setattr(_feed, "streams", lambda devices: 3)  # more streams than this machine may have cores
+    monkeypatch.setattr(_feed, "stream", lambda i, n: used.append(i % n) or stream(i, n))
+    several = fit()
+    assert used[:5] == [0, 1, 2, 0, 1], "the chunks did not take turns over the streams"
+    assert np.mean(one.ok) > 0.9
+    _identical(one, several)
+
+
+def test_streams_one_per_core_on_a_cpu_only():
+    if _feed._STREAM_ID is None:
+        pytest.skip("this jaxlib has no execution streams")
+    assert _feed.streams(jax.devices("cpu")) == len(os.sched_getaffinity(0))
+
+    class Accelerator:
+        platform = "gpu"
+
+    assert _feed.streams([Accelerator()]) == 1

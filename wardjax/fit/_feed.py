@@ -5,20 +5,51 @@ they are. On an accelerator, rows held in (pageable) host memory must cross to t
 and one ``device_put`` of a large array copies at a few GB/s on one host thread, slower than the
 fit itself: there the copies of the next chunks run in worker threads, one per array, while
 the current chunk computes. Arrays already on a device (:class:`jax.Array`) are not copied.
+
+On a CPU the chunks' programs run on all cores at once (:func:`stream`): XLA's CPU client runs
+the calls of one execution stream one after another, each after the last one enqueued, so chunks
+dispatched on one stream use one core at a time whatever their number.
 """
 
 from __future__ import annotations
 
 import collections
 import concurrent.futures
+import contextlib
+import os
 from collections.abc import Callable, Iterator, Sequence
 
 import jax
+from jaxlib import xla_client
 
 from ._data import pad_rows
 
 AHEAD = 2  # chunks copied ahead of the one computing
 WORKERS = 8  # host threads making the copies (each holds one array of one chunk)
+
+
+# The current thread's execution stream, as a context manager (None in a jaxlib without it: one stream).
+_STREAM_ID = getattr(xla_client, "execution_stream_id", None)
+
+
+def streams(devices: Sequence) -> int:
+    """Execution streams a fit's chunks take turns on: one per core this process may run on, on a CPU
+    (the client's pool of threads that run calls has one per core); one elsewhere (an accelerator
+    runs its calls in order anyway)."""
+    if devices[0].platform != "cpu" or _STREAM_ID is None:
+        return 1
+    cores = os.sched_getaffinity(0) if hasattr(os, "sched_getaffinity") else range(os.cpu_count() or 1)
+    return max(len(cores), 1)
+
+
+def stream(i: int, n: int) -> contextlib.AbstractContextManager:
+    """Context in which compiled calls run on execution stream ``i mod n`` (the default stream for
+    ``n = 1``): calls on different streams wait only for their inputs, so chunks ``i`` taking turns
+    over ``n`` streams run on up to ``n`` cores at once. Each call is the same program on the same
+    rows as on one stream: the results are the same to the bit."""
+    if n <= 1 or _STREAM_ID is None:
+        return contextlib.nullcontext()
+    return _STREAM_ID(1 + i % n)
 
 
 def host_fed(data: Sequence, devices: Sequence) -> bool:

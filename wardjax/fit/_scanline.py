@@ -68,6 +68,9 @@ Model = Literal["isotropic", "anisotropic"]
 # slower; measured here, 1,024 rows beat 4,096 in float32 too (14.3k vs 9.7k
 # fits per CPU-second).
 _CHUNK = {np.dtype(np.float64): 1024, np.dtype(np.float32): 1024}
+# Few samples per row: more rows per chunk, at most ~64 k samples (4,096 rows of up to 16 samples); each
+# call costs the host a fixed ~0.4 ms (dispatch, fetch) that 1,024 rows of 9 samples hardly outweigh.
+_SMALL_CHUNK_SAMPLES = 64
 _ACCELERATOR_CHUNK = 131_072  # per device, on a GPU with ≥ 32 GB (see _default_chunk)
 # Small problems (a pixel seen in a few photographs): compiled for their exact sample count.
 TINY = 16
@@ -274,8 +277,8 @@ def fit_scanlines(
         float32 fit is not certified (``max_steps``, ``nonfinite``) are
         fitted again in float64, so float32 loses no accuracy.
     chunk_size
-        Scanlines per compiled call and device; default 1024 on CPU, 131,072
-        on an accelerator with ≥ 32 GB of memory (32,768 on a smaller one).
+        Scanlines per compiled call and device; default 1024 on CPU (4,096 for up to 16 samples,
+        2,048 up to 32), 131,072 on an accelerator with ≥ 32 GB of memory (32,768 on a smaller one).
     devices
         JAX devices to spread each call's scanlines over (``NamedSharding``
         over a 1-D mesh, scanline axis); default ``jax.devices()``. Scanlines
@@ -319,7 +322,8 @@ def fit_scanlines(
     host_fed = _feed.host_fed((f_r, wi, wo, mask, weights), devices)
     f, wi, wo, mask, weights = validate(f_r, wi, wo, mask, weights, sign_later=host_fed)
     iso = model == "isotropic"
-    chunk = int(chunk_size or _default_chunk(dtype, devices))
+    n_pad = _sample_bucket(f.shape[1]) if solver == "fast" else None
+    chunk = int(chunk_size or _default_chunk(dtype, devices, n_pad))
     data = (f, wi, wo, mask, weights)
     kw: dict[str, Any] = dict(
         iso=iso,
@@ -334,7 +338,7 @@ def fit_scanlines(
     sandwich = weights is None and errors != "gauss_newton" and solver == "fast"
     sol = _solve(data, dtype=dtype, chunk=chunk, check=check, sandwich=sandwich, steps=_steps(max_steps), **kw)
     if dtype == np.float32 and solver == "fast":
-        _refit_uncertified(sol, data, check=check, sandwich=sandwich, **kw)
+        sol = _refit_uncertified(sol, data, check=check, sandwich=sandwich, **kw)
     if solver == "fast" and iso and errors != "gauss_newton":
         if errors == "profile":
             sol.nonlinear[sol.status == Status.CONVERGED] = _profile.PENDING
@@ -347,8 +351,8 @@ def fit_scanlines(
 # What a padded sample of each input of ``data = (f, wi, wo, mask, weights)`` holds: unusable, weight 0.
 
 
-def _refit_uncertified(sol: _varpro.ScanlineSolution, data, *, devices, **kw) -> None:
-    """Fit again in float64, in place, the float32 fits that are not certified.
+def _refit_uncertified(sol: _varpro.ScanlineSolution, data, *, devices, **kw) -> _varpro.ScanlineSolution:
+    """``sol`` with the float32 fits that are not certified fitted again in float64 (in place).
 
     Rounding can cancel the algebraic centring into a spurious optimum (~3 in 10⁴ scanlines with
     broad lobes): those rows (status ``max_steps`` or ``nonfinite``) take float64's results, profiled
@@ -356,11 +360,14 @@ def _refit_uncertified(sol: _varpro.ScanlineSolution, data, *, devices, **kw) ->
     """
     redo = np.flatnonzero(np.isin(sol.status, (Status.MAX_STEPS, Status.NONFINITE)))
     if redo.size:
+        if not np.asarray(sol.cov_gn).flags.writeable:  # no row was pending (see _to_host): now some may be
+            sol = sol._replace(cov_gn=np.array(sol.cov_gn))
         sub = tuple(None if a is None else a[redo] for a in data)
         f64 = np.dtype(np.float64)
         again = _solve(sub, dtype=f64, chunk=_default_chunk(f64, devices), devices=devices, **kw)
         for full, part in zip(sol, again):
             full[redo] = part
+    return sol
 
 
 def _check_devices(devices) -> list:
@@ -370,14 +377,19 @@ def _check_devices(devices) -> list:
     return devices
 
 
-def _default_chunk(dtype, devices) -> int:
-    """Rows per call and device: 1024 on CPU (cache-sized); on an accelerator 131,072 where it has ≥ 32 GB
-    (one call then holds ~5 GB in float64), else 32,768. Measured on an H200 with 10⁶ scanlines on the
-    device: 131,072 rows gave 2.58 M fits/s in float64 against 1.96 M at 32,768 (3.75 vs 2.92 M in float32).
+def _default_chunk(dtype, devices, n_pad: int | None = None) -> int:
+    """Rows per call and device: 1024 on CPU (cache-sized), up to 4× more for rows of ``n_pad`` ≤ 32
+    (padded) samples (4,096 rows up to 16 samples, 2,048 at 32); on an accelerator 131,072 where it has
+    ≥ 32 GB (one call then holds ~5 GB in float64), else 32,768. Measured on an H200 with 10⁶ scanlines on
+    the device: 131,072 rows gave 2.58 M fits/s in float64 against 1.96 M at 32,768 (3.75 vs 2.92 M in
+    float32). On two CPU cores, 10⁵ problems of 9 samples (``errors="auto"``): 1,024 rows 2.49 µs
+    per fit (wall), 2,048 rows 1.80, 4,096 rows 1.56, 8,192 rows 1.54; the host thread's CPU 1.18 →
+    0.42 µs per fit from 1,024 to 4,096 rows.
     """
     device = devices[0]
     if device.platform == "cpu":
-        return _CHUNK[np.dtype(dtype)]
+        rows = _CHUNK[np.dtype(dtype)]
+        return rows * min(4, max(1, _SMALL_CHUNK_SAMPLES // n_pad)) if n_pad else rows
     limit = (device.memory_stats() or {}).get("bytes_limit", 0)
     return _ACCELERATOR_CHUNK if limit >= 32 << 30 else _ACCELERATOR_CHUNK // 4
 
@@ -450,43 +462,54 @@ def _solve(
         spans = [(a, b, -(-rows // len(devices)) * len(devices)) for a, b, rows in buckets(n_rows, chunk)]
         small = solver == "fast" and _small_programs(n_pad, devices)
         signs = []
-        for (start, stop, rows), args in zip(spans, _feed.chunks(data, spans, put, threaded=host_fed)):
+        streams = _feed.streams(devices)  # on a CPU, chunks on all cores at once
+        chunks = _feed.chunks(data, spans, put, threaded=host_fed)
+        for i, ((start, stop, rows), args) in enumerate(zip(spans, chunks)):
             if host_fed and args[4] is not None:
                 signs.append(negative_flag(args[4]))  # validate left host weights' sign to the device
-            if solver == "fast":
-                out = _fast_chunk(
-                    *args,
-                    n=n,
-                    iso=iso,
-                    rtol=rtol,
-                    normalization=normalization,
-                    dtype=dtype,
-                    check=check,
-                    sandwich=sandwich,
-                    steps=steps,
-                    lanes=_profile_lanes(rows, n_pad) if profile_here else 0,
-                    small=small,
-                )
-            else:
-                out = _optimistix_chunk(*clean(*args, dtype=dtype), normalization=normalization)
+            with _feed.stream(i, streams):
+                if solver == "fast":
+                    out = _fast_chunk(
+                        *args,
+                        n=n,
+                        iso=iso,
+                        rtol=rtol,
+                        normalization=normalization,
+                        dtype=dtype,
+                        check=check,
+                        sandwich=sandwich,
+                        steps=steps,
+                        lanes=_profile_lanes(rows, n_pad) if profile_here else 0,
+                        small=small,
+                    )
+                else:
+                    out = _optimistix_chunk(*clean(*args, dtype=dtype), normalization=normalization)
             pieces.append((out, start, stop))  # dispatched asynchronously
         check_sign(signs)
-        return _to_host(pieces, n_rows, sandwich=sandwich and solver == "fast", every_gn=every_gn)
+        local = devices[0].platform == "cpu" and not host_fed  # results in host memory already
+        return _to_host(pieces, n_rows, sandwich=sandwich and solver == "fast", every_gn=every_gn, local=local)
 
 
-def _to_host(pieces, n_rows: int, *, sandwich: bool, every_gn: bool = False) -> _varpro.ScanlineSolution:
+def _to_host(
+    pieces, n_rows: int, *, sandwich: bool, every_gn: bool = False, local: bool = False
+) -> _varpro.ScanlineSolution:
     """The chunks' results as float64 NumPy arrays of ``n_rows`` rows, each value copied once into place.
 
     Without the sandwich ``cov_gn`` is ``cov`` (the same array). With it, Gauss–Newton's covariance
     crosses to the host only for the rows the profile pass reads (curvature check failed; every row
     with ``every_gn``), NaN elsewhere: on an accelerator the results' copy, not the fit, bounds small
-    problems.
+    problems. ``local``: the results are in host memory already (a CPU device); NumPy reads them in
+    place, without :func:`jax.device_get`'s per-array machinery (a third of the host's share of a chunk).
+    Where no row is pending (the search program profiled every row that failed the check), ``cov_gn``
+    is a read-only NaN broadcast: filling 200 bytes a row of fresh memory cost the host a third of its
+    CPU time at 10⁶ rows.
     """
     first = pieces[0][0]
     skip = () if sandwich and every_gn else ("cov_gn",)
     host = {k: np.empty((n_rows, *np.shape(v)[1:]), np.float64) for k, v in first._asdict().items() if k not in skip}
+    fetch = (lambda tree: {k: np.asarray(v) for k, v in tree.items()}) if local else jax.device_get
     for out, start, stop in pieces:
-        got = jax.device_get({k: v for k, v in out._asdict().items() if k not in skip})
+        got = fetch({k: v for k, v in out._asdict().items() if k not in skip})
         for k, v in got.items():
             host[k][start:stop] = v[: stop - start]
     made = cast(Any, _varpro.ScanlineSolution)  # NumPy arrays in the kernel's NamedTuple
@@ -494,11 +517,14 @@ def _to_host(pieces, n_rows: int, *, sandwich: bool, every_gn: bool = False) -> 
         return made(**host)
     if not sandwich:
         return made(**host, cov_gn=host["cov"])
+    pending = host["nonlinear"] == _profile.PENDING
+    if not pending.any():
+        return made(**host, cov_gn=np.broadcast_to(np.float64(np.nan), host["cov"].shape))
     cov_gn = np.full_like(host["cov"], np.nan)
     for out, start, stop in pieces:
-        at = np.flatnonzero(host["nonlinear"][start:stop] == _profile.PENDING)
+        at = np.flatnonzero(pending[start:stop])
         if at.size:
-            cov_gn[start + at] = np.asarray(out.cov_gn[jnp.asarray(at)])
+            cov_gn[start + at] = np.asarray(out.cov_gn)[at] if local else np.asarray(out.cov_gn[jnp.asarray(at)])
     return made(**host, cov_gn=cov_gn)
 
 
