@@ -129,3 +129,25 @@ def test_exported_program_is_read_back_without_tracing_and_gives_the_same_number
         monkeypatch.setattr(_exported, "_folder", lambda: None)
         plain = _exported.call("t", functools.partial(jitted, k=4), (("k", 4),), (x, tree))
         np.testing.assert_allclose(np.asarray(plain[1]), np.asarray(jitted(x, tree, k=4)[1]), rtol=0, atol=0)
+
+
+def test_back_whitening_of_all_columns_at_once_is_each_transposed_alone(rng):
+    """``Wᵀ`` of ``K`` columns in one product, in both layouts (channels together ``(S, C N, C N)``, per channel
+    ``(S, C, N, N)``), against each scanline's transposed matrix times each column with NumPy."""
+    import jax
+
+    from wardjax.effects._gls import _back_whiten_columns
+
+    W, _, _ = _whitened_problem(rng)
+    s_n, m, _ = W.shape
+    c_n, n, k = 3, m // 3, 4
+    cols = rng.normal(size=(s_n, n, c_n, k))
+    per = np.tril(rng.normal(size=(s_n, c_n, n, n))) + 3.0 * np.eye(n)
+    with jax.enable_x64(True):
+        got, got_per = np.asarray(_back_whiten_columns(W, cols)), np.asarray(_back_whiten_columns(per, cols))
+    for s in range(s_n):
+        for j in range(k):
+            want = (W[s].T @ cols[s, :, :, j].T.reshape(-1)).reshape(c_n, n).T  # values ordered channel by channel
+            np.testing.assert_allclose(got[s, :, :, j], want, rtol=1e-12, atol=1e-12)
+            for c in range(c_n):
+                np.testing.assert_allclose(got_per[s, :, c, j], per[s, c].T @ cols[s, :, c, j], rtol=1e-12)

@@ -20,6 +20,7 @@ import optimistix as optx
 
 from . import _exported
 from ._effect import Effect, Param
+from ._gls import _back_whiten_columns
 
 _LINEAR_SOLVER = lx.QR()
 # Levenberg–Marquardt's stopping rule (relative, absolute) on every parameter and every residual; passed to the
@@ -143,6 +144,29 @@ def _residual_view(u, active, data, *, model, effects, layout_key):
         r = model.residuals(vals, act, effects, data)
     # r: the values', then the scanline levels'
     return r[: pred.size], pred, rho, jnp.sum(r[pred.size :] ** 2)
+
+
+@functools.partial(jax.jit, static_argnames=("model", "effects", "layout_key"))
+def _residual_jacobian(u, idx, kmask, active, data, *, model, effects, layout_key):
+    """``Wᵀ ∂r/∂u`` ``(S, N, C, K)`` of the values' whitened residuals ``r`` (ρd profiled) against ``u[idx]``, back in
+    units of ``1/σ`` (``Wᵀ``: the texture's whitening transposed; none where the data are not whitened).
+
+    Forward-mode autodiff (:func:`jax.jacfwd`) over the ``K`` slots of ``idx``, as the
+    Levenberg–Marquardt program takes its Jacobian: slots with ``kmask`` false are zero columns, so one
+    compiled program serves every set of free parameters padded to one width.
+    """
+    names = tuple(e.name for e in effects)
+    ctx = model.context(data) if hasattr(model, "context") else None
+    act = {e.name: active[i] for i, e in enumerate(effects)}
+    shape = jnp.shape(data.y)
+
+    def resid(z):
+        vals = _unpack(layout_key, u.at[idx].set(jnp.where(kmask, z, u[idx])), names)
+        return model.residuals(vals, act, effects, data, ctx)[: math.prod(shape)]
+
+    J = jnp.where(kmask, jax.jacfwd(resid)(u[idx]), 0.0).reshape(*shape, idx.shape[0])
+    W = getattr(data, "whiten", None)
+    return J if W is None else _back_whiten_columns(W, J)
 
 
 def _job_rows(jobs, layout, n_e, width):
