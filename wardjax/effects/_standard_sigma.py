@@ -46,22 +46,28 @@ from ._report import Candidate, FitState
 from ._solve import _residual_jacobian, static_key
 from ._texture_term import is_identity_whitening
 
-__all__ = ["lag_form", "standard_deflated", "widened_report", "with_standard"]
+__all__ = ["jacobian_at", "lag_form", "needs_jacobian", "standard_deflated", "widened_report", "with_standard"]
 
 
-def _jacobian(search, st: FitState) -> np.ndarray:
-    """``Wᵀ ∂r/∂u`` ``(S, N, C, K)`` of the whitened values' residuals against ``st``'s ``K`` free parameters, back
-    in units of ``1/σ`` (:func:`~wardjax.effects._solve._residual_jacobian`: forward-mode autodiff in one compiled
-    program per run, the free parameters padded to the run's width)."""
+def jacobian_at(search, u: np.ndarray, free, active) -> np.ndarray:
+    """``Wᵀ ∂r/∂u`` ``(S, N, C, K)`` of the whitened values' residuals at ``u`` against its ``K`` parameters ``free``
+    (the effects ``active`` switched on), back in units of ``1/σ``
+    (:func:`~wardjax.effects._solve._residual_jacobian`: forward-mode autodiff in one compiled program per run,
+    the free parameters padded to the run's width)."""
     idx = np.full(search.k_pad, search.layout.size, np.int32)
-    idx[: len(st.free)] = st.free
-    act = np.array([i in st.active for i in range(len(search.testable))], bool)
+    idx[: len(free)] = free
+    act = np.array([i in active for i in range(len(search.testable))], bool)
     static = dict(model=search.model, effects=search.testable, layout_key=search.layout.key)
     with jax.enable_x64(True):
         fn = functools.partial(_residual_jacobian, **static)
-        args = (jnp.asarray(st.u), jnp.asarray(idx), jnp.asarray(np.arange(search.k_pad) < len(st.free)))
+        args = (jnp.asarray(u), jnp.asarray(idx), jnp.asarray(np.arange(search.k_pad) < len(free)))
         J = _exported.call("residual_jacobian", fn, static_key(static), args + (jnp.asarray(act), search.data_dev))
-    return np.asarray(J, np.float64)[..., : len(st.free)]
+    return np.asarray(J, np.float64)[..., : len(free)]
+
+
+def needs_jacobian(search) -> bool:
+    """Whether the fits of ``search`` have the standard's lags added to their σ (:func:`with_standard`)."""
+    return getattr(search.data, "standard", None) is not None and getattr(search.model, "kind", None) == "scanline"
 
 
 def lag_form(a: np.ndarray, c: np.ndarray, R: np.ndarray, columns: np.ndarray, across_only: bool) -> np.ndarray:
@@ -88,10 +94,9 @@ def lag_form(a: np.ndarray, c: np.ndarray, R: np.ndarray, columns: np.ndarray, a
 def with_standard(search, st: FitState) -> FitState:
     """``st`` (a :class:`~wardjax.effects._report.FitState` fitted under ``search``) with the smoothed standard's
     lags in its covariance and σ; ``st`` itself where the data carry no standard's noise."""
-    std = getattr(search.data, "standard", None)
-    if std is None or not st.free or getattr(search.model, "kind", None) != "scanline":
+    if not needs_jacobian(search) or not st.free:
         return st
-    c, R, columns = (np.asarray(x) for x in std)
+    c, R, columns = (np.asarray(x) for x in search.data.standard)
     free = list(st.free)
     cov_b = np.asarray(st.cov)[np.ix_(free, free)]
     if not np.all(np.isfinite(cov_b)):
@@ -100,7 +105,7 @@ def with_standard(search, st: FitState) -> FitState:
     y, sig, mask = (np.asarray(x) for x in (data.y, data.sigma, data.mask))
     W = getattr(data, "whiten", None)
     textured = W is not None and not is_identity_whitening(np.asarray(W))
-    a = (_jacobian(search, st) @ cov_b) * np.where(mask, y / sig, 0.0)[..., None]
+    a = (jacobian_at(search, st.u, st.free, st.active) @ cov_b) * np.where(mask, y / sig, 0.0)[..., None]
     cov = np.array(st.cov, copy=True)
     cov[np.ix_(free, free)] = cov_b + lag_form(a, c, R, columns, across_only=textured)
     return dataclasses.replace(st, cov=cov, sigma=search.layout.sigma(st.u, cov))
