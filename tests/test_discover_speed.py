@@ -129,3 +129,60 @@ def test_exported_program_is_read_back_without_tracing_and_gives_the_same_number
         monkeypatch.setattr(_exported, "_folder", lambda: None)
         plain = _exported.call("t", functools.partial(jitted, k=4), (("k", 4),), (x, tree))
         np.testing.assert_allclose(np.asarray(plain[1]), np.asarray(jitted(x, tree, k=4)[1]), rtol=0, atol=0)
+
+
+def test_back_whitening_of_all_columns_at_once_is_each_transposed_alone(rng):
+    """``Wᵀ`` of ``K`` columns in one product, in both layouts (channels together ``(S, C N, C N)``, per channel
+    ``(S, C, N, N)``), against each scanline's transposed matrix times each column with NumPy."""
+    import jax
+
+    from wardjax.effects._gls import _back_whiten_columns
+
+    W, _, _ = _whitened_problem(rng)
+    s_n, m, _ = W.shape
+    c_n, n, k = 3, m // 3, 4
+    cols = rng.normal(size=(s_n, n, c_n, k))
+    per = np.tril(rng.normal(size=(s_n, c_n, n, n))) + 3.0 * np.eye(n)
+    with jax.enable_x64(True):
+        got, got_per = np.asarray(_back_whiten_columns(W, cols)), np.asarray(_back_whiten_columns(per, cols))
+    for s in range(s_n):
+        for j in range(k):
+            want = (W[s].T @ cols[s, :, :, j].T.reshape(-1)).reshape(c_n, n).T  # values ordered channel by channel
+            np.testing.assert_allclose(got[s, :, :, j], want, rtol=1e-12, atol=1e-12)
+            for c in range(c_n):
+                np.testing.assert_allclose(got_per[s, :, c, j], per[s, c].T @ cols[s, :, c, j], rtol=1e-12)
+
+
+def test_materialised_residuals_linearise_to_their_jacobian_not_to_the_data(rng):
+    """The LM's residuals (``_solve._materialised``) have the tangents of the function they wrap, and their
+    linearisation (what optimistix keeps in its loop state) holds the ``M × K`` Jacobian, not the data the
+    tangents read (a whitening ``W`` of ``M × M``) as JAX's own linearisation of the function does."""
+    import jax
+    import jax.numpy as jnp
+
+    from wardjax.effects._solve import _materialised
+
+    m, k = 60, 3
+    W = np.tril(rng.normal(size=(m, m))) + 3.0 * np.eye(m)
+    x = rng.normal(size=(m, k))
+
+    def f(z, args):
+        W, x = args
+        return W @ jnp.tanh(x @ z)
+
+    z, dz = rng.normal(size=k), rng.normal(size=k)
+    with jax.enable_x64(True):
+        r_ref, t_ref = jax.jvp(lambda z: f(z, (W, x)), (z,), (dz,))
+        r, t = jax.jvp(lambda z: _materialised(f, z, (W, x)), (z,), (dz,))
+        _, lin_ref = jax.linearize(lambda z: f(z, (W, x)), z)
+        _, lin = jax.linearize(lambda z: _materialised(f, z, (W, x)), z)
+        t_lin = lin(jnp.asarray(dz))
+    np.testing.assert_array_equal(np.asarray(r), np.asarray(r_ref))
+    np.testing.assert_allclose(np.asarray(t), np.asarray(t_ref), rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(np.asarray(t_lin), np.asarray(t_ref), rtol=1e-12, atol=1e-12)
+
+    def held(fn):
+        return sum(np.size(a) for a in jax.tree_util.tree_leaves(fn))
+
+    assert held(lin_ref) >= m * m  # the whitening itself
+    assert held(lin) <= m * k + m  # the Jacobian (and at most the residuals)

@@ -85,6 +85,7 @@ def test_dark_metal_sigma_covers_the_standards_noise(tmp_path):
     p = wj.WardParams(rho_d=(0.03,) * 3, rho_s=0.35, alpha_x=0.08, alpha_y=0.08)
     cap = wj.simulate_capture(p, tmp_path / "metal", seed=1, texture="none", image_size=(160, 120))
     data = capture_data(cap, max_samples=6000)
+    assert data.standard is not None
     c, R, cols = data.standard
     b = next(bb for bb in (1, 2, 3, 4) if bin_lag_correlation(1.5, bb).shape == R.shape)
     search, ref, _ = _baseline(ScanlineModel(cap.config.fit.normalization), data, (), 20, 64, False)
@@ -105,3 +106,65 @@ def test_dark_metal_sigma_covers_the_standards_noise(tmp_path):
             z["lags"].append(d / wide.sigma["model"][name])
     assert 0.75 < np.std(z["lags"]) < 1.35
     assert np.std(z["plain"]) > 1.8
+
+
+def _whitened_search(rng, names=("anisotropy", "offset")):
+    """A :class:`~wardjax.effects._search._Search` over Ward scanlines (ρd 0.1, ρs 0.2, α 0.1, a little noise)
+    whitened by a random lower-triangular ``W`` ``(S, C N, C N)``, with the effects ``names`` testable."""
+    import dataclasses
+
+    from wardjax.effects import ScanlineModel, scanline_data
+    from wardjax.effects._library import library
+    from wardjax.effects._search import _Search
+
+    s_n, n, c_n = 4, 12, 3
+    ang = np.linspace(0.1, 0.7, n)
+    tilt = np.linspace(-0.2, 0.2, s_n)[:, None]
+    wi = np.stack([np.broadcast_to(tilt, (s_n, n)), np.broadcast_to(np.sin(ang), (s_n, n)), np.ones((s_n, n))], -1)
+    wo = wi * np.array([1.0, -1.0, 1.0])
+    wi, wo = (v / np.linalg.norm(v, axis=-1, keepdims=True) for v in (wi, wo))
+    y = 0.1 / np.pi + 0.2 * np.exp(-((np.arange(n) - n / 2) ** 2) / 8.0)[None, :, None] * np.ones((s_n, 1, c_n))
+    y = y + 0.01 * rng.normal(size=y.shape)
+    m = c_n * n
+    W = np.tril(rng.normal(size=(s_n, m, m))) * 0.1 + np.eye(m)
+    data = dataclasses.replace(scanline_data(y, wi, wo, np.full(y.shape, 0.01)), whiten=W)
+    model = ScanlineModel()
+    testable = tuple(e for e in library("scanline") if e.name in names)
+    return _Search(model, data, testable, 20, 64)
+
+
+def test_standard_jacobian_by_autodiff_is_the_central_differences_of_the_residuals(rng):
+    """The sandwich's ``Wᵀ ∂r/∂u`` (one compiled program, forward-mode autodiff) against central differences of the
+    residual program's whitened residuals, transposed-whitened column by column with NumPy, at a state with an
+    effect switched on; padded slots stay out."""
+    import functools
+
+    import jax
+    import jax.numpy as jnp
+
+    from wardjax.effects._solve import _residual_view
+    from wardjax.effects._standard_sigma import jacobian_at
+
+    search = _whitened_search(rng)
+    lay = search.layout
+    u = lay.u_initial() + 0.05 * rng.normal(size=lay.size + 1)
+    free = tuple(lay.slices["model"] + lay.slices["anisotropy"])
+    act = (0,)
+    got = jacobian_at(search, u, free, act)
+    flags = jnp.asarray([i in act for i in range(len(search.testable))])
+    view = functools.partial(_residual_view, model=search.model, effects=search.testable, layout_key=lay.key)
+    W, shape = np.asarray(search.data.whiten), np.shape(search.data.y)
+    s_n, n, c_n = shape
+    with jax.enable_x64(True):
+        for k, j in enumerate(free):
+            h = 1e-5 * max(1.0, abs(u[j]))  # the old difference quotient's step
+            up, dn = u.copy(), u.copy()
+            up[j] += h
+            dn[j] -= h
+            col = np.asarray(view(up, flags, search.data_dev)[0]) - np.asarray(view(dn, flags, search.data_dev)[0])
+            col = (col / (2 * h)).reshape(shape).transpose(0, 2, 1).reshape(s_n, c_n * n)
+            want = np.einsum("sji,sj->si", W, col).reshape(s_n, c_n, n).transpose(0, 2, 1)
+            scale = np.max(np.abs(want))
+            assert scale > 0
+            np.testing.assert_allclose(got[..., k], want, rtol=0, atol=1e-6 * scale)
+    assert got.shape == (*shape, len(free))

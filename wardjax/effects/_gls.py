@@ -41,6 +41,16 @@ def _whiten_columns(W, cols):
     return jnp.swapaxes(jnp.einsum("sij,sjk->sik", W, flat).reshape(s_n, c_n, n, k), 1, 2)
 
 
+def _back_whiten_columns(W, cols):
+    """``Wᵀ`` of each of ``K`` vectors at once (whitened residuals back in units of ``1/σ``): ``cols``
+    ``(S, N, C, K)``; ``W`` ``(S, C N, C N)`` (channels together, one product for all ``K``) or ``(S, C, N, N)``."""
+    if W.ndim == 4:
+        return jnp.einsum("scji,sjck->sick", W, cols)
+    s_n, n, c_n, k = cols.shape
+    flat = jnp.swapaxes(cols, 1, 2).reshape(s_n, c_n * n, k)  # values ordered channel by channel, as W's
+    return jnp.swapaxes(jnp.einsum("sji,sjk->sik", W, flat).reshape(s_n, c_n, n, k), 1, 2)
+
+
 def _gls_design(W, inv_sp):
     """ρd's whitened design ``(S, N, C, C_cols)``: column ``c`` is ``L⁻¹`` of ``inv_sp`` on channel ``c`` alone."""
     c_n = inv_sp.shape[-1]
@@ -108,9 +118,7 @@ def _gls_rho_joint_jvp(primals, tangents):
     rho = _gls_solve(A, b)
     x = rho[:, 0, :] / jnp.pi  # (S, C)
     e = b - jnp.einsum("snck,sk->snc", A, x)
-    s_n, n, _, k = A.shape
-    flat = jnp.swapaxes(jnp.concatenate([A, e[..., None]], -1), 1, 2).reshape(s_n, c_n * n, k + 1)
-    back = jnp.swapaxes(jnp.einsum("sji,sjk->sik", W, flat).reshape(s_n, c_n, n, k + 1), 1, 2)  # Wᵀ [A, e]
+    back = _back_whiten_columns(W, jnp.concatenate([A, e[..., None]], -1))  # Wᵀ [A, e]
     H = jnp.einsum("snck,sncl->skl", A, A) + _TINY * jnp.eye(c_n)[None]
     q = jnp.sum(d_inv * back[..., c_n], axis=1)  # dDᵀ Wᵀ e, (S, C)
     p = jnp.einsum("snck,snc->sk", back[..., :c_n], d_res - d_inv * x[:, None, :])

@@ -20,6 +20,7 @@ import optimistix as optx
 
 from . import _exported
 from ._effect import Effect, Param
+from ._gls import _back_whiten_columns
 
 _LINEAR_SOLVER = lx.QR()
 # Levenberg–Marquardt's stopping rule (relative, absolute) on every parameter and every residual; passed to the
@@ -84,25 +85,52 @@ def _unpack(key: tuple, u, names: tuple[str, ...]):
     return out
 
 
+@functools.partial(jax.custom_jvp, nondiff_argnums=(0,))
+def _materialised(f, z, args):
+    """``f(z, args)``, whose linearisation in ``z`` is its Jacobian as a matrix ``(M, K)``: ``J dz``.
+
+    Levenberg–Marquardt (optimistix) keeps the linearisation of the residuals
+    in its loop state and copies it in every step's accept/reject branch.
+    Linearised by JAX, it holds what the tangents read: the texture's whitening
+    ``W`` (tens of MB, a constant of the fit) and the model's intermediates;
+    here it holds ``J``, computed with the residuals (:func:`jax.jacfwd`, ``K``
+    tangents over the primal's evaluation, as the solver's QR took them from the
+    linearisation before). ``args`` is data: its tangents are not propagated.
+    """
+    return f(z, args)
+
+
+@_materialised.defjvp
+def _materialised_jvp(f, primals, tangents):
+    z, args = primals
+    dz, _ = tangents
+    jac, r = jax.jacfwd(lambda x: (f(x, args),) * 2, has_aux=True)(z)
+    return r, jac @ dz
+
+
+def _data_residuals(z, args, *, model, effects, layout_key):
+    """The whitened residuals ``(M,)`` with ``u[idx] = z`` where ``kmask`` (``args``: ``u0, idx, kmask, active, data,
+    ctx``)."""
+    u0, idx, kmask, active, data, ctx = args
+    u = u0.at[idx].set(jnp.where(kmask, z, u0[idx]))
+    vals = _unpack(layout_key, u, tuple(e.name for e in effects))
+    act = {e.name: active[i] for i, e in enumerate(effects)}
+    return model.residuals(vals, act, effects, data, ctx)
+
+
 @functools.partial(jax.jit, static_argnames=("model", "effects", "layout_key", "max_steps"))
 def _solve_batch(u0, a0, idx, kmask, active, prior_w, tol, data, *, model, effects, layout_key, max_steps):
-    names = tuple(e.name for e in effects)
     ctx = model.context(data) if hasattr(model, "context") else None
+    f = functools.partial(_data_residuals, model=model, effects=effects, layout_key=layout_key)
 
     def one(u0, a0, idx, kmask, active):
         pw = jnp.where(kmask, prior_w[idx], 0.0)
         z0 = a0[idx]  # the priors' centres: the starting values, kept when a fit is continued
-
-        def data_resid(z):
-            u = u0.at[idx].set(jnp.where(kmask, z, u0[idx]))
-            vals = _unpack(layout_key, u, names)
-            act = {e.name: active[i] for i, e in enumerate(effects)}
-            return model.residuals(vals, act, effects, data, ctx)
-
-        n_data = jax.eval_shape(data_resid, u0[idx]).shape[0]
+        args = (u0, idx, kmask, active, data, ctx)
+        n_data = jax.eval_shape(f, u0[idx], args).shape[0]
 
         def resid(z, _):
-            return jnp.concatenate([data_resid(z), pw * (z - z0)])
+            return jnp.concatenate([_materialised(f, z, args), pw * (z - z0)])
 
         # the tolerances are data (``tol``: rtol, atol): another rule would not trace a new program
         solver = optx.LevenbergMarquardt(rtol=tol[0], atol=tol[1], linear_solver=_LINEAR_SOLVER)
@@ -143,6 +171,27 @@ def _residual_view(u, active, data, *, model, effects, layout_key):
         r = model.residuals(vals, act, effects, data)
     # r: the values', then the scanline levels'
     return r[: pred.size], pred, rho, jnp.sum(r[pred.size :] ** 2)
+
+
+@functools.partial(jax.jit, static_argnames=("model", "effects", "layout_key"))
+def _residual_jacobian(u, idx, kmask, active, data, *, model, effects, layout_key):
+    """``Wᵀ ∂r/∂u`` ``(S, N, C, K)`` of the values' whitened residuals ``r`` (ρd profiled) against ``u[idx]``, back in
+    units of ``1/σ`` (``Wᵀ``: the texture's whitening transposed; none where the data are not whitened).
+
+    Forward-mode autodiff (:func:`jax.jacfwd`) over the ``K`` slots of ``idx``, as the
+    Levenberg–Marquardt program takes its Jacobian: slots with ``kmask`` false are zero columns, so one
+    compiled program serves every set of free parameters padded to one width.
+    """
+    ctx = model.context(data) if hasattr(model, "context") else None
+    args = (u, idx, kmask, active, data, ctx)
+    shape = jnp.shape(data.y)
+
+    def resid(z):
+        return _data_residuals(z, args, model=model, effects=effects, layout_key=layout_key)[: math.prod(shape)]
+
+    J = jnp.where(kmask, jax.jacfwd(resid)(u[idx]), 0.0).reshape(*shape, idx.shape[0])
+    W = getattr(data, "whiten", None)
+    return J if W is None else _back_whiten_columns(W, J)
 
 
 def _job_rows(jobs, layout, n_e, width):

@@ -43,55 +43,31 @@ import numpy as np
 from . import _exported
 from ._evidence import _lr_p
 from ._report import Candidate, FitState
-from ._solve import _residual_view, static_key
+from ._solve import _residual_jacobian, static_key
+from ._texture_term import is_identity_whitening
 
-__all__ = ["lag_form", "standard_deflated", "widened_report", "with_standard"]
-
-
-_STEP = 1e-5  # central differences' step in u (relative above 1): truncation ~10⁻¹⁰, rounding ~10⁻¹¹ of r
+__all__ = ["jacobian_at", "lag_form", "needs_jacobian", "standard_deflated", "widened_report", "with_standard"]
 
 
-def _residuals(search, u, act) -> np.ndarray:
-    """The whitened values' residuals ``(S N C,)`` (ρd profiled) at ``u``: the run's compiled residual program."""
+def jacobian_at(search, u: np.ndarray, free, active) -> np.ndarray:
+    """``Wᵀ ∂r/∂u`` ``(S, N, C, K)`` of the whitened values' residuals at ``u`` against its ``K`` parameters ``free``
+    (the effects ``active`` switched on), back in units of ``1/σ``
+    (:func:`~wardjax.effects._solve._residual_jacobian`: forward-mode autodiff in one compiled program per run,
+    the free parameters padded to the run's width)."""
+    idx = np.full(search.k_pad, search.layout.size, np.int32)
+    idx[: len(free)] = free
+    act = np.array([i in active for i in range(len(search.testable))], bool)
     static = dict(model=search.model, effects=search.testable, layout_key=search.layout.key)
     with jax.enable_x64(True):
-        fn = functools.partial(_residual_view, **static)
-        r = _exported.call("residual_view", fn, static_key(static), (jnp.asarray(u), jnp.asarray(act), search.data_dev))
-    return np.asarray(r[0], np.float64)
+        fn = functools.partial(_residual_jacobian, **static)
+        args = (jnp.asarray(u), jnp.asarray(idx), jnp.asarray(np.arange(search.k_pad) < len(free)))
+        J = _exported.call("residual_jacobian", fn, static_key(static), args + (jnp.asarray(act), search.data_dev))
+    return np.asarray(J, np.float64)[..., : len(free)]
 
 
-def _jacobian(search, st) -> np.ndarray:
-    """``∂r/∂u`` ``(S N C, K)`` of the whitened values' residuals against ``st``'s free parameters.
-
-    Central differences through the residual program every run has already
-    compiled (:func:`~wardjax.effects._solve._residual_view`), ``2K`` calls:
-    a variance term needs a few digits, and a program of its own (``jacfwd``
-    of the model with every effect behind a switch) compiled in about half
-    the Levenberg–Marquardt program's time, on every cold ``diagnose``.
-    """
-    act = np.array([i in st.active for i in range(len(search.testable))], bool)
-    u0 = np.asarray(st.u, np.float64)
-    cols = []
-    for j in st.free:
-        h = _STEP * max(1.0, abs(float(u0[j])))
-        up, dn = u0.copy(), u0.copy()
-        up[j] += h
-        dn[j] -= h
-        cols.append((_residuals(search, up, act) - _residuals(search, dn, act)) / (2.0 * h))
-    return np.stack(cols, -1)
-
-
-def _back_whitened(W: np.ndarray, cols: np.ndarray) -> np.ndarray:
-    """``Wᵀ`` along each scanline of ``cols`` ``(S, N, C, K)``; ``W`` ``(S, C N, C N)`` or ``(S, C, N, N)``."""
-    if W.ndim == 4:
-        return np.einsum("scji,sjck->sick", W, cols)
-    s_n, n, c_n, k = cols.shape
-    flat = np.swapaxes(cols, 1, 2).reshape(s_n, c_n * n, k)
-    return np.swapaxes(np.einsum("sji,sjk->sik", W, flat).reshape(s_n, c_n, n, k), 1, 2)
-
-
-def _is_identity(W: np.ndarray) -> bool:
-    return W.ndim == 3 and bool(np.array_equal(W, np.broadcast_to(np.eye(W.shape[-1]), W.shape)))
+def needs_jacobian(search) -> bool:
+    """Whether the fits of ``search`` have the standard's lags added to their σ (:func:`with_standard`)."""
+    return getattr(search.data, "standard", None) is not None and getattr(search.model, "kind", None) == "scanline"
 
 
 def lag_form(a: np.ndarray, c: np.ndarray, R: np.ndarray, columns: np.ndarray, across_only: bool) -> np.ndarray:
@@ -118,22 +94,18 @@ def lag_form(a: np.ndarray, c: np.ndarray, R: np.ndarray, columns: np.ndarray, a
 def with_standard(search, st: FitState) -> FitState:
     """``st`` (a :class:`~wardjax.effects._report.FitState` fitted under ``search``) with the smoothed standard's
     lags in its covariance and σ; ``st`` itself where the data carry no standard's noise."""
-    std = getattr(search.data, "standard", None)
-    if std is None or not st.free or getattr(search.model, "kind", None) != "scanline":
+    if not needs_jacobian(search) or not st.free:
         return st
-    c, R, columns = (np.asarray(x) for x in std)
+    c, R, columns = (np.asarray(x) for x in search.data.standard)
     free = list(st.free)
     cov_b = np.asarray(st.cov)[np.ix_(free, free)]
     if not np.all(np.isfinite(cov_b)):
         return st
     data = search.data
     y, sig, mask = (np.asarray(x) for x in (data.y, data.sigma, data.mask))
-    G = (_jacobian(search, st) @ cov_b).reshape(*y.shape, len(free))
     W = getattr(data, "whiten", None)
-    textured = W is not None and not _is_identity(np.asarray(W))
-    if W is not None and textured:
-        G = _back_whitened(np.asarray(W), G)
-    a = G * np.where(mask, y / sig, 0.0)[..., None]
+    textured = W is not None and not is_identity_whitening(np.asarray(W))
+    a = (jacobian_at(search, st.u, st.free, st.active) @ cov_b) * np.where(mask, y / sig, 0.0)[..., None]
     cov = np.array(st.cov, copy=True)
     cov[np.ix_(free, free)] = cov_b + lag_form(a, c, R, columns, across_only=textured)
     return dataclasses.replace(st, cov=cov, sigma=search.layout.sigma(st.u, cov))

@@ -26,7 +26,7 @@ from ._texture import (
     texture_whitening,
 )
 
-__all__ = ["CrossTexture", "identity_whitened", "white_noise_share", "with_texture"]
+__all__ = ["CrossTexture", "identity_whitened", "is_identity_whitening", "white_noise_share", "with_texture"]
 
 _NOISE_FLOOR = 0.02  # white noise off the highlight at least this fraction of the texture variance
 # the variogram's Hann window, a fraction of half a scanline (0.35–0.7 read clean captures alike)
@@ -122,6 +122,11 @@ def identity_whitened(data):
     s_n, n, c_n = np.shape(data.y)
     eye = np.broadcast_to(np.eye(c_n * n), (s_n, c_n * n, c_n * n))
     return dataclasses.replace(data, whiten=eye, levels=_no_levels(data))
+
+
+def is_identity_whitening(W: np.ndarray) -> bool:
+    """Whether ``W`` is :func:`identity_whitened`'s (white noise in the texture's layout), not a texture's."""
+    return W.ndim == 3 and bool(np.array_equal(W, np.broadcast_to(np.eye(W.shape[-1]), W.shape)))
 
 
 def _inv_irradiance(data, m: np.ndarray) -> np.ndarray:

@@ -156,21 +156,6 @@ def check_outputs_apart(captures: list[Path], names: list[str], out) -> None:
                 )
 
 
-def check_out_outside(capture, out) -> None:
-    """Refuse an output folder that is, or lies inside, the capture folder ``capture`` (``wardjax diagnose --out``).
-
-    Its files (``report.json``, ``report.md``, the PNGs) are written straight into ``out``, under
-    names a capture folder may hold; a folder that holds the capture cannot collide with it.
-    """
-    out, capture = Path(out), Path(capture)
-    dest, src = out.resolve(), capture.resolve()
-    if dest == src or dest.is_relative_to(src):
-        raise ValueError(
-            f"--out {out}: {'is' if dest == src else 'lies inside'} the capture folder {capture}; "
-            "choose an output folder outside it"
-        )
-
-
 def _names(captures: list[Path]) -> list[str]:
     names, seen = [], {}
     for c in captures:

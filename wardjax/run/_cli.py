@@ -20,6 +20,7 @@ from ._cli_checks import (
     _fail,
     _parse_region,
     _parse_size,
+    check_out_outside,
     out_dir_option,
 )
 from ._cli_import import import_cmd
@@ -599,8 +600,6 @@ def diagnose_cmd(
     if not capture.exists():
         _fail(f"{capture}: no such capture folder")
     _check_out_dir(out_dir)
-    from ._batch import check_out_outside
-
     try:  # outputs never touch inputs
         check_out_outside(capture, out_dir)
     except ValueError as exc:

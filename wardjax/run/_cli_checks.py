@@ -18,6 +18,7 @@ __all__ = [
     "_one_line",
     "_parse_region",
     "_parse_size",
+    "check_out_outside",
     "choice_option",
     "out_dir_option",
 ]
@@ -68,6 +69,21 @@ def _check_out_dir(path: Path) -> None:
         check_writable_dir(path)
     except ValueError as e:
         _fail(str(e))
+
+
+def check_out_outside(capture, out) -> None:
+    """Refuse an output folder that is, or lies inside, the capture folder ``capture`` (``wardjax diagnose --out``).
+
+    Its files (``report.json``, ``report.md``, the PNGs) are written straight into ``out``, under
+    names a capture folder may hold; a folder that holds the capture cannot collide with it.
+    """
+    out, capture = Path(out), Path(capture)
+    dest, src = out.resolve(), capture.resolve()
+    if dest == src or dest.is_relative_to(src):
+        raise ValueError(
+            f"--out {out}: {'is' if dest == src else 'lies inside'} the capture folder {capture}; "
+            "choose an output folder outside it"
+        )
 
 
 def _check_out_file(path: Path) -> None:
