@@ -33,7 +33,9 @@ def _columns(data, cols):
     cut = {k: np.asarray(getattr(data, k))[i] for k in ("y", "sigma", "mask", "wi", "wo")}
     cens = None if data.censored is None else np.asarray(data.censored)[i]
     cov = {k: np.asarray(v)[i] for k, v in data.cov.items()}
-    return dataclasses.replace(data, **cut, censored=cens, cov=cov, standard=(*data.standard[:2], np.asarray(cols)))
+    c = np.asarray(data.standard[0])
+    c = c[i] if c.ndim == 3 else c  # per value, or per channel
+    return dataclasses.replace(data, **cut, censored=cens, cov=cov, standard=(c, data.standard[1], np.asarray(cols)))
 
 
 def _robust_sd(z: np.ndarray) -> float:

@@ -149,14 +149,14 @@ def capture_data(cap: Capture, *, max_samples: int = 20_000, band_rows: int = 51
     wi, pts = bins.wi[keep], bins.points[keep]
     sigma = _noise_model(F, exact=~cens, w=inv_irradiance(pts, rig.lamp, wi))
     # the smoothed standard's noise, which second differences do not see (wardjax.effects._standard_noise)
-    c = standard_noise(cap)
+    c = standard_noise(cap, pts)  # at each value's mirror point: the standard's level, and its noise, vary
     sigma_px = float(cap.config.fit.smooth_standard_px)
     share = c * smoothing_factor(sigma_px, bins.b) if sigma_px > 0 else np.zeros_like(c)
     sigma = np.sqrt(sigma * sigma + share * np.where(np.isfinite(F), F, 0.0) ** 2)
     # ... and which the fitted parameters average over many values: their covariance needs its lags too
     standard = None
     if sigma_px > 0 and np.any(c > 0):
-        standard = (c, bin_lag_correlation(sigma_px, bins.b), np.flatnonzero(keep))
+        standard = (np.broadcast_to(c, F.shape).copy(), bin_lag_correlation(sigma_px, bins.b), np.flatnonzero(keep))
     data = scanline_data(
         F,
         wi,

@@ -93,7 +93,7 @@ class ScanlineData(eqx.Module):
         ``a`` ``(C,)``). All zeros: the same compiled program, no term.
     standard
         ``(c, R, columns)`` or ``None``: the smoothed reflectance standard's
-        relative noise per channel ``c`` ``(C,)``, its correlation ``R`` at bin
+        relative noise ``c`` ``(S, N, C)`` at each value's mirror point, its correlation ``R`` at bin
         lags and each scanline's bin column ``(S,)``
         (:mod:`~wardjax.effects._standard_noise`); read only by the fitted
         parameters' covariance (:mod:`~wardjax.effects._standard_sigma`).

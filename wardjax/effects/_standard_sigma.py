@@ -3,11 +3,12 @@
 Why
     Every probe value is divided by the reflectance standard at its mirror
     point, smoothed first, so the standard's noise reaches the values as a
-    relative error ``δy_i = f_i ε_i`` with ``Cov(ε_i, ε_j) = c R(Δ_ij)``
-    (:mod:`~wardjax.effects._standard_noise`: ``c`` per channel, ``R`` the
-    smoothed, binned kernel's autocorrelation at the bins' lag ``Δ`` along and
-    across the scanlines). The noise model holds its per-value share
-    ``c R(0) f²``, which keeps the gap right; but smoothing keeps the noise's
+    relative error ``δy_i = f_i ε_i`` with ``Cov(ε_i, ε_j) = √(c_i c_j) R(Δ_ij)``
+    (:mod:`~wardjax.effects._standard_noise`: ``c`` per value and channel, the
+    standard's relative noise at the value's mirror point; ``R`` the smoothed,
+    binned kernel's autocorrelation at the bins' lag ``Δ`` along and across
+    the scanlines). The noise model holds its per-value share
+    ``c_i R(0) f_i²``, which keeps the gap right; but smoothing keeps the noise's
     low frequencies (``Σ_Δ R = 1/b²`` against ``R(0)``), and a parameter
     fitted over many values averages exactly those. On a dark glossy sample,
     where the standard is much dimmer than the highlight and its noise
@@ -19,10 +20,10 @@ The sandwich
     whitened residuals by ``W (δ/σ)`` (``W`` the texture's whitening, ``I``
     under white noise) and the estimate by ``−H⁻¹ Jᵀ W (δ/σ)`` (the profile's
     projection is idempotent, so the profiled ``J`` already carries it). With
-    ``A = (Wᵀ J H⁻¹) · f/σ`` the lags add (White 1980's sandwich over the
+    ``A = (Wᵀ J H⁻¹) · √c f/σ`` the lags add (White 1980's sandwich over the
     covariance the fit did not assume)
 
-        ΔCov = c Σ_{Δ ≠ 0 in lags} R(Δ) Σ_i A_i A_{i+Δ}ᵀ      per channel, summed over channels.
+        ΔCov = Σ_{Δ ≠ 0 in lags} R(Δ) Σ_i A_i A_{i+Δ}ᵀ      per channel, summed over channels.
 
     Under white noise every lag but ``Δ = 0`` is added. Where the texture is
     carried, its covariance was measured along each scanline on residuals
@@ -71,15 +72,15 @@ def needs_jacobian(search) -> bool:
 
 
 def lag_form(a: np.ndarray, c: np.ndarray, R: np.ndarray, columns: np.ndarray, across_only: bool) -> np.ndarray:
-    """``Σ_ch c_ch Σ_{Δ ≠ 0} R(Δ) Σ_i a_i a_{i+Δ}ᵀ`` ``(K, K)`` for ``a`` ``(S, N, C, K)`` on the bin grid.
+    """``Σ_ch Σ_{Δ ≠ 0} R(Δ) Σ_i √(c_i c_{i+Δ}) a_i a_{i+Δ}ᵀ`` ``(K, K)`` for ``a`` ``(S, N, C, K)`` on the bin grid.
 
-    ``R`` ``(2L + 1, 2L + 1)`` indexed ``[Δs, Δn]`` (centre ``Δ = 0``); scanline ``s`` is bin column
-    ``columns[s]``; ``across_only`` keeps the lags with ``Δs ≠ 0``.
+    ``c`` ``(C,)`` or per value ``(S, N, C)``; ``R`` ``(2L + 1, 2L + 1)`` indexed ``[Δs, Δn]`` (centre ``Δ = 0``);
+    scanline ``s`` is bin column ``columns[s]``; ``across_only`` keeps the lags with ``Δs ≠ 0``.
     """
     s_n, n, c_n, k = a.shape
     lag = R.shape[0] // 2
     grid = np.zeros((int(columns.max()) + 1 + 2 * lag, n + 2 * lag, c_n, k))
-    grid[lag + columns, lag : lag + n] = a * np.sqrt(np.asarray(c, float))[None, None, :, None]
+    grid[lag + columns, lag : lag + n] = a * np.sqrt(np.broadcast_to(np.asarray(c, float), a.shape[:3]))[..., None]
     core = grid[lag : -lag or None, lag : -lag or None]
     out = np.zeros((k, k))
     for ds in range(-lag, lag + 1):
