@@ -80,8 +80,12 @@ def _score_candidate(search: _Search, cur: FitState, structure_p_of: Callable[[s
     bound = max(_RHO_S_MAX, _rho_s(cur))
     phys = [k for k, st in enumerate(sts) if e.physical(st.values[e.name]) and _rho_s(st) <= bound]
     pool = phys or range(len(sts))
-    # the best form by BIC (for an effect without optional parameters: the lowest χ²)
-    k = min(pool, key=lambda k: sts[k].chi2 + ks[k] * search.ln_n) if sts else None
+    # the best form by BIC (for an effect without optional parameters: the lowest χ²); of starts within
+    # rounding of the best (equivalent minima, e.g. anisotropy's (η, φ) and (−η, φ + π/2)) the first, so that
+    # the choice does not hang on the last digits of how the fits were batched
+    score = {k: sts[k].chi2 + ks[k] * search.ln_n for k in pool}
+    best = min(score.values(), default=math.nan)
+    k = next((k for k in pool if score[k] <= best + 1e-9 * max(1.0, abs(best))), None)
     sp = structure_p_of(e.covariate)
     if k is None:
         return Candidate(e.name, e.k, math.nan, -math.inf, 1.0, 0.0, sp, False, None, math.nan), None
