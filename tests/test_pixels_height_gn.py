@@ -37,7 +37,7 @@ def _gradient_in_heights(g, arrays, theta, s, shape):
     f, w, wi, wo = arrays
     t = jnp.asarray([1.0, 0.0, 0.0], jnp.float64)
     _, b, c = slope_systems(jnp.asarray(g), f, w, wi, wo, theta, s, t, normalization=NORM)
-    ops = ph._Operators(shape, ph.MARGIN)
+    ops = ph._Operators(shape)
     return ops.grad_adjoint(np.asarray(b).reshape(shape + (2,))), float(np.sum(c))
 
 
