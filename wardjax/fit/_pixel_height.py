@@ -42,6 +42,18 @@ it at). The constant, which no slope sees, is pinned at 0. The normal equations
 are sparse (a 13-sample cross per height) and solved directly
 (:func:`scipy.sparse.linalg.spsolve`).
 
+A finite difference is off by 0.8 % at 6 pixels per bump period, 7 % at 4 and
+26 % at 3 (its shifted stencils 14 %, 114 %, 385 %). The other ``D`` on the same
+heights is the spectral derivative of the image taken as one period of the
+surface (``i k``, its Nyquist term zero; ``R`` its second-difference term
+only, the sawtooth being invisible to it everywhere): exact above the Nyquist
+rate where the surface repeats over the image, while where it does not the
+edges are tied to the opposite ones and the photos there are fitted worse.
+Both are fitted and the one whose heights fit the photos with the lower summed
+χ² is kept (:func:`heights_of_least_chi2`): the same ``H × W`` heights, so the
+χ² compare like for like (its normal equations are dense, so it is tried up to
+:data:`_PERIODIC_MAX` pixels).
+
 That projection is each pixel's χ² replaced by its quadratic model at the
 pixel's own optimum. Where a pixel's photos see only the tails of its
 highlight, χ² is far from quadratic over the slopes its neighbours ask of it,
@@ -70,13 +82,22 @@ from . import _pixel_model as pm
 from ._pixel_clusters import STEPS
 from ._pixel_normals import fit_normals, normal_from_slopes, slope_systems
 
-__all__ = ["check_image_shape", "heights_by_gauss_newton", "integrable_slopes", "on_height_field"]
+__all__ = [
+    "check_image_shape",
+    "heights_by_gauss_newton",
+    "heights_of_least_chi2",
+    "integrable_slopes",
+    "on_height_field",
+]
 
 STENCIL = 7  # samples per derivative: order 6 in the interior (0.15 % off at 8 pixels per period)
 _EPS = 1e-4  # the second difference's weight, over the mean precision
 _SAWTOOTH = 1.0  # the 6th difference's weight, over the mean precision (module docstring)
 _RIDGE = 1e-12  # pins the constant height, over the mean precision
 _ROUNDS = 3  # projections onto the height field while the labels change there
+_PERIODIC_MAX = (
+    4096  # pixels up to which the periodic spectral derivative is tried too (its normal equations are dense)
+)
 _GN_STEPS = 20  # Levenberg–Marquardt steps on the heights (the 32² renders converge in 5–6)
 
 
@@ -111,6 +132,15 @@ def _derivative_matrix(n: int) -> sparse.csr_array:
     return sparse.csr_array((vals, (rows, cols)), shape=(n, n))
 
 
+def _spectral_matrix(n: int) -> sparse.csr_array:
+    """``(n, n)``: the derivative of ``n`` samples of a period-``n`` sequence, ``i k`` in the Fourier domain
+    (zero at the Nyquist frequency, where a real sequence has no derivative): exact for a periodic height
+    sampled above its Nyquist rate."""
+    k = 2.0 * np.pi * np.fft.fftfreq(n)
+    ik = 1j * np.where(np.abs(k) < np.pi, k, 0.0)
+    return sparse.csr_array(np.fft.ifft(ik[:, None] * np.fft.fft(np.eye(n), axis=0), axis=0).real)
+
+
 def _difference(n: int, order: int) -> sparse.csr_array:
     """``(n − order, n)``: the ``order``-th difference ``Σ_j (−1)^j C(order, j) h[i + j]`` / ``2^order``
     (response ``sin^order(kδ/2)``: 1 at the Nyquist frequency)."""
@@ -124,16 +154,19 @@ def _difference(n: int, order: int) -> sparse.csr_array:
 
 class _Operators:
     """The derivative ``D`` (heights of the ``H × W`` image → its slopes, ``(2P, P)``), its adjoint and the
-    penalty's matrix (module docstring), as sparse matrices of the row-major flattened heights."""
+    penalty's matrix (module docstring), as sparse matrices of the row-major flattened heights; ``periodic``:
+    the spectral derivative of the image's heights taken as one period (no sixth-difference penalty: it
+    does not read a sawtooth at the pixel pitch anywhere)."""
 
-    def __init__(self, shape: tuple[int, int]):
+    def __init__(self, shape: tuple[int, int], periodic: bool = False):
         self.shape = shape
         h, w = shape
-        d_col = sparse.kron(sparse.eye_array(h), _derivative_matrix(w), format="csr")
-        d_row = sparse.kron(_derivative_matrix(h), sparse.eye_array(w), format="csr")
+        derivative = _spectral_matrix if periodic else _derivative_matrix
+        d_col = sparse.kron(sparse.eye_array(h), derivative(w), format="csr")
+        d_row = sparse.kron(derivative(h), sparse.eye_array(w), format="csr")
         self.dx, self.dy = d_col, -d_row  # g_x = ∂h/∂column, g_y = −∂h/∂row
         self.curv = sparse.csr_array((h * w, h * w))
-        for order, weight in ((2, 16.0 * _EPS), (6, _SAWTOOTH)):
+        for order, weight in ((2, 16.0 * _EPS), (6, 0.0 if periodic else _SAWTOOTH)):
             c_col = sparse.kron(sparse.eye_array(h), _difference(w, order))
             c_row = sparse.kron(_difference(h, order), sparse.eye_array(w))
             self.curv = self.curv + weight * (c_col.T @ c_col + c_row.T @ c_row)
@@ -152,13 +185,14 @@ class _Operators:
 
 
 def integrable_slopes(
-    slopes: np.ndarray, precision: np.ndarray, image_shape: tuple[int, int]
+    slopes: np.ndarray, precision: np.ndarray, image_shape: tuple[int, int], *, periodic: bool = False
 ) -> tuple[np.ndarray, np.ndarray]:
     """The slopes ``(P, 2)`` of the height field nearest to ``slopes`` in the metric ``precision (P, 2, 2)``.
 
     Pixels are row-major in an ``image_shape = (H, W)`` image (module docstring). Non-finite
     slopes or precisions count as no information (weight 0). Returns ``g* (P, 2)`` and the
-    height ``(H, W)`` in pixel pitches, its mean zero.
+    height ``(H, W)`` in pixel pitches, its mean zero. ``periodic``: the image's heights as one period of a
+    periodic surface, differentiated spectrally (:class:`_Operators`).
     """
     shape = (int(image_shape[0]), int(image_shape[1]))
     g = np.asarray(slopes, np.float64).reshape(-1, 2)
@@ -168,7 +202,7 @@ def integrable_slopes(
     wt = np.where(bad[..., None, None], 0.0, 0.5 * (wt + np.swapaxes(wt, -1, -2)))
     scale = float(np.mean(np.trace(wt, axis1=-2, axis2=-1))) / 2.0
     wt = wt / (scale if scale > 0 else 1.0)  # the solution does not depend on a common scale
-    ops = _Operators(shape)
+    ops = _Operators(shape, periodic)
     dx, dy = ops.dx, ops.dy
 
     def weighted(i: int, j: int) -> sparse.csr_array:
@@ -179,11 +213,16 @@ def integrable_slopes(
     rhs = dx.T @ wg[:, 0] + dy.T @ wg[:, 1]
     # the constant, which no slope sees (rhs ⟂ it: every stencil sums to 0), pinned at 0 by a ridge far below the rest
     a = (a + _RIDGE * sparse.eye_array(a.shape[0])).tocsc()
-    height = np.asarray(spsolve(a, rhs)).reshape(shape)
+    if periodic:  # every slope reads its whole row and column: the normal equations are dense
+        height = np.linalg.solve(a.toarray(), rhs).reshape(shape)
+    else:
+        height = np.asarray(spsolve(a, rhs)).reshape(shape)
     return ops.grad(height).reshape(-1, 2), height - np.mean(height)
 
 
-def heights_by_gauss_newton(g, data, theta_p, s_p, tangent, normalization: str, shape, *, steps: int = _GN_STEPS):
+def heights_by_gauss_newton(
+    g, data, theta_p, s_p, tangent, normalization: str, shape, *, steps: int = _GN_STEPS, periodic: bool = False
+):
     """The height field of least summed χ², ``h* = argmin_h Σ_p χ²_p((D h)_p)``, from integrable slopes ``g (P, 2)``.
 
     Each pixel's χ² (ρd profiled, its lobe ``theta_p (P, d)``, ``s_p (P,)`` given) is linearised at the
@@ -213,7 +252,7 @@ def heights_by_gauss_newton(g, data, theta_p, s_p, tangent, normalization: str, 
     for _ in range(steps):
         damped = h + lam * float(np.mean(np.trace(h, axis1=1, axis2=2))) / 2.0 * eye
         target = g - np.linalg.solve(damped, b[..., None])[..., 0]
-        trial, _ = integrable_slopes(target, damped, shape)
+        trial, _ = integrable_slopes(target, damped, shape, periodic=periodic)
         h_new, b_new, c_new = system(trial)
         if not float(np.sum(c_new)) < cost:
             lam *= 10.0
@@ -225,6 +264,30 @@ def heights_by_gauss_newton(g, data, theta_p, s_p, tangent, normalization: str, 
         if done:
             break
     return g, cost
+
+
+def heights_of_least_chi2(g, precision, data, theta_p, s_p, tangent, normalization: str, shape):
+    """The slopes ``(P, 2)`` projected (:func:`integrable_slopes`) and moved to the least summed χ²
+    (:func:`heights_by_gauss_newton`) with each derivative, the finite difference and the periodic spectral
+    one (images of up to :data:`_PERIODIC_MAX` pixels); returns those of the lower χ², it, and whether
+    the spectral derivative gave them.
+
+    Both fit the same ``H × W`` heights, so their summed χ² on the same photos compare like for like. The
+    finite difference is off by 7 % at 4 pixels per bump period and 26 % at 3 (more at the edges); the
+    spectral one is exact there where the surface repeats over the image, and wraps the edges onto each
+    other where it does not, which costs χ² at the edges.
+    """
+    n_pixels = int(shape[0]) * int(shape[1])
+    best = None
+    for periodic in (False, True) if n_pixels <= _PERIODIC_MAX else (False,):
+        start, _ = integrable_slopes(g, precision, shape, periodic=periodic)
+        g_star, cost = heights_by_gauss_newton(
+            start, data, theta_p, s_p, tangent, normalization, shape, periodic=periodic
+        )
+        if best is None or cost < best[1]:
+            best = (g_star, cost, periodic)
+    assert best is not None
+    return best
 
 
 @jax.jit
@@ -245,21 +308,24 @@ def on_height_field(theta, s, labels, normal_map, data, t, normalization, shape)
     A pixel whose photos see only the tails of its highlight may have taken the wrong lobe with a normal
     bent to fit it; on the height field its normal comes from its neighbours, and its lobe is decided
     there. While labels change (at most :data:`_ROUNDS` rounds) the slopes are refitted under the new
-    labels and projected again. Returns ``theta``, ``s``, ``labels``, the normal map, the geometry, the
+    labels and projected again. The heights are those of least summed χ² with either derivative
+    (:func:`heights_of_least_chi2`). Returns ``theta``, ``s``, ``labels``, the normal map, the geometry, the
     ``(a, g)`` covariances of the pixels' own fits (an upper bound on the projected slopes' uncertainty),
-    and the χ² after, the slopes' RMS move and how many labels changed.
+    and the χ² after, the slopes' RMS move, how many labels changed and the derivative kept.
     """
     f, w, wi, wo = data
     c = f.shape[-1]
     g_from = -normal_map[:, :2] / normal_map[:, 2:]
     moved = relabelled = 0
+    periodic = False
     for _ in range(_ROUNDS):
         g, _, _, _, cov = fit_normals(f, w, wi, wo, theta[labels], s[labels], t, normalization, g_from, grid=False)
         cov_g = np.asarray(cov[:, c:, c:])
         cov_g = np.where(np.all(np.isfinite(cov_g), (1, 2))[:, None, None], cov_g, 0.0)
         g = np.asarray(g)
-        g_star, _ = integrable_slopes(g, np.linalg.pinv(cov_g), shape)
-        g_star, _ = heights_by_gauss_newton(g_star, data, theta[labels], s[labels], t, normalization, shape)
+        g_star, _, periodic = heights_of_least_chi2(
+            g, np.linalg.pinv(cov_g), data, theta[labels], s[labels], t, normalization, shape
+        )
         moved = moved or float(np.sqrt(np.mean((g_star - g) ** 2)))
         normal_map = normal_from_slopes(jnp.asarray(g_star))
         geom = pm.geometry(wi, wo, normal_map, t, normalization)
@@ -280,5 +346,10 @@ def on_height_field(theta, s, labels, normal_map, data, t, normalization, shape)
         normal_map,
         geom,
         cov,
-        {"chi2": chi2, "slopes_moved_rms": moved, "labels_changed": relabelled},
+        {
+            "chi2": chi2,
+            "slopes_moved_rms": moved,
+            "labels_changed": relabelled,
+            "derivative": "spectral" if periodic else "difference",
+        },
     )
