@@ -9,6 +9,7 @@ mirror point; noise σ = 0.01 f (weights 1/σ², a calibrated noise model).
 import jax
 import numpy as np
 import pytest
+from _captures import isotropic_set
 
 import wardjax as wj
 from wardjax.simulate import x_offset_for_slope
@@ -19,20 +20,6 @@ MAD = 1.4826
 def robust_sd(z):
     z = np.asarray(z)
     return MAD * np.median(np.abs(z - np.median(z)))
-
-
-def isotropic_set(rng, s, alpha_range=(0.03, 0.3)):
-    truth = wj.WardParams(
-        rho_d=rng.uniform(0.05, 0.8, (s, 3)),
-        rho_s=rng.uniform(0.01, 0.1, s),
-        alpha_x=(a := rng.uniform(*alpha_range, s)),
-        alpha_y=a,
-    )
-    rig = wj.ScanlineRig.random(s, rng)
-    # Through the highlight: the half vector tilts by at most 1.5 α across the scanline.
-    x0 = x_offset_for_slope(rig, rng.uniform(-1.5, 1.5, s) * truth.alpha_x)
-    data = wj.simulate_scanlines(truth, x_offsets=x0, rig=rig, seed=rng)
-    return truth, data
 
 
 @pytest.fixture(scope="module")

@@ -16,21 +16,15 @@ import os
 import jax
 import numpy as np
 import pytest
+from _captures import isotropic_set
 
 import wardjax as wj
 from wardjax.fit import _data, _feed
-from wardjax.simulate import x_offset_for_slope
 
 
 @pytest.fixture(scope="module")
 def data():
-    rng = np.random.default_rng(11)
-    s = 150
-    a = rng.uniform(0.03, 0.3, s)
-    truth = wj.WardParams(rho_d=rng.uniform(0.05, 0.8, (s, 3)), rho_s=rng.uniform(0.01, 0.1, s), alpha_x=a, alpha_y=a)
-    rig = wj.ScanlineRig.random(s, rng)
-    x0 = x_offset_for_slope(rig, rng.uniform(-1.5, 1.5, s) * a)
-    return wj.simulate_scanlines(truth, x_offsets=x0, rig=rig, n_samples=64, seed=rng)
+    return isotropic_set(np.random.default_rng(11), 150, n_samples=64)[1]
 
 
 def _fields(fit):
