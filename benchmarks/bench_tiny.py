@@ -31,20 +31,9 @@ import wardjax as wj
 from wardjax.fit import _data, _feed, _scanline
 
 from .bench_fit import REPEATS, draw_scanlines, scipy_fit, z_sd
+from .bench_synthesis import _best_of
 
 SPAN = (1.5, 4.0)  # half-width of the samples around the highlight, in α (half-vector slope)
-
-
-def _best_of(k: int, fn):
-    """Best wall time of ``k`` calls of ``fn``, the process CPU time of that call, and its result."""
-    best, cpu, out = float("inf"), float("nan"), None
-    for _ in range(k):
-        t0, c0 = time.perf_counter(), time.process_time()
-        out = fn()
-        wall = time.perf_counter() - t0
-        if wall < best:
-            best, cpu = wall, time.process_time() - c0
-    return best, cpu, out
 
 
 def bench_tiny(n: int, k: int, scipy_n: int) -> None:
@@ -63,7 +52,7 @@ def bench_tiny(n: int, k: int, scipy_n: int) -> None:
     for errors in ("auto", "gauss_newton"):
         fit = lambda errors=errors: wj.fit_scanlines(d.f_r, d.wi, d.wo, errors=errors)
         fit()  # compile
-        el, cpu, res = _best_of(REPEATS, fit)
+        el, cpu, res = _best_of(fit, REPEATS)
         kinds, counts = np.unique(res.errors[res.ok], return_counts=True)
         used = ", ".join(f"{a} {c / max(res.ok.sum(), 1):.0%}" for a, c in zip(kinds, counts))
         za, zs = z_sd(res, d)
