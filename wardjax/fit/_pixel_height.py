@@ -70,6 +70,7 @@ Heights are in units of the pixel pitch (square pixels); rows run along
 
 from __future__ import annotations
 
+import functools
 import math
 
 import jax
@@ -184,6 +185,12 @@ class _Operators:
         return (self.curv @ np.asarray(height).ravel()).reshape(self.shape)
 
 
+@functools.lru_cache(maxsize=8)
+def _operators(shape: tuple[int, int], periodic: bool) -> _Operators:
+    """The :class:`_Operators` of an image shape, built once: the height fit projects at every step."""
+    return _Operators(shape, periodic)
+
+
 def integrable_slopes(
     slopes: np.ndarray, precision: np.ndarray, image_shape: tuple[int, int], *, periodic: bool = False
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -202,7 +209,7 @@ def integrable_slopes(
     wt = np.where(bad[..., None, None], 0.0, 0.5 * (wt + np.swapaxes(wt, -1, -2)))
     scale = float(np.mean(np.trace(wt, axis1=-2, axis2=-1))) / 2.0
     wt = wt / (scale if scale > 0 else 1.0)  # the solution does not depend on a common scale
-    ops = _Operators(shape, periodic)
+    ops = _operators(shape, bool(periodic))
     dx, dy = ops.dx, ops.dy
 
     def weighted(i: int, j: int) -> sparse.csr_array:
