@@ -244,10 +244,10 @@ def _baseline(model, data, testable, lm_steps: int, chunk: int, texture: bool):
     def make(d):
         return _Search(model, d, testable, lm_steps, chunk)
 
-    def textured(pred, rho, known=False):
-        """The run's search with the texture measured on the residuals about ``pred``, and its summary (``known``:
-        the texture was found on the baseline, so it is carried whatever its significance now)."""
-        got = with_texture(data, pred, rho, significant=known)
+    def textured(pred, rho):
+        """The run's search with the texture measured on the residuals about ``pred``, and its summary (white
+        noise, in the identity's layout, where the residuals show no significant texture)."""
+        got = with_texture(data, pred, rho)
         if got is None:  # no texture left: white noise, in the identity's layout (the run's compiled program)
             return _with_holdout(plain), None
         data_tex, tex, cross = got

@@ -33,9 +33,7 @@ _NOISE_FLOOR = 0.02  # white noise off the highlight at least this fraction of t
 _VARIOGRAM_WINDOW = 0.5
 
 
-def with_texture(
-    data, pred: np.ndarray, rho: np.ndarray | None = None, variogram: bool = False, significant: bool = False
-):
+def with_texture(data, pred: np.ndarray, rho: np.ndarray | None = None, variogram: bool = False):
     """``data`` with the texture carried as a Gaussian process, a summary, and the texture the process leaves out.
 
     Returns ``(data, summary, CrossTexture)``. The white noise is re-estimated with the texture from the
@@ -51,8 +49,7 @@ def with_texture(
     ``variogram``: the covariance along the scanline from the cross-variogram
     (:func:`~wardjax.effects._texture.lag_covariances`), windowed over a quarter
     scanline: the guard's second opinion (:mod:`~wardjax.effects._recheck`).
-    Returns ``None`` if no texture is found, unless ``significant`` (the texture is known to be there: the
-    covariance is then measured whatever the significance test reads).
+    Returns ``None`` if no texture is found.
     """
     if getattr(data, "kind", None) not in ("ratio", "brdf") or data.y.shape[1] < 8:
         return None
@@ -65,7 +62,7 @@ def with_texture(
     e = y - pred
     w = _inv_irradiance(data, m)
     fit = estimate_texture(e, pred, exact, off=off, w=w)
-    if not (significant or fit.significant().any()):
+    if not fit.significant().any():
         return None
     n, c_n = y.shape[1], y.shape[-1]
     lags = lag_covariances(e, off, variogram)
