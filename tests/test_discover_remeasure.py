@@ -4,7 +4,6 @@ import math
 
 import numpy as np
 import pytest
-from scipy.ndimage import gaussian_filter1d
 
 import wardjax as wj
 from wardjax.effects import scanline_data
