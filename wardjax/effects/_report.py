@@ -296,16 +296,19 @@ class DiscoveryReport:
         :mod:`wardjax.effects._averaging`."""
         return model_averaged(self.steps, self.baseline)
 
+    def _under(self) -> str:
+        """Where the variogram's covariance read the final gap: the words that say so, else nothing."""
+        v = self.settings.get("variogram_gap")
+        return "" if v is None else f" under the texture's covariance from the variogram (gap {v:.3f})"
+
     def verdict(self) -> str:
         if self.within_noise:
             what = f"found {', '.join(self.found)}" if self.found else "nothing needed"
             if self.ambiguous:
                 what += "".join(f" (or {b}: not told apart)" for _, b, _ in self.ambiguous)
-            v = self.settings.get("variogram_gap")
-            under = "" if v is None else f" under the texture's covariance from the variogram (gap {v:.3f})"
-            return f"{what}; the gap is within the noise{under}: nothing further needed"
+            return f"{what}; the gap is within the noise{self._under()}: nothing further needed"
         if self.found and self.explained:
-            return f"found {', '.join(self.found)}; the residuals are now consistent with the noise"
+            return f"found {', '.join(self.found)}; the residuals are now consistent with the noise{self._under()}"
         if self.found:
             return f"found {', '.join(self.found)}, but structure remains that no library effect explains"
         if self.explained:
