@@ -409,6 +409,35 @@ def test_float32_cancellation_is_flagged_and_refit_in_float64():
     np.testing.assert_allclose(res.params.alpha_x[~redo], ref.params.alpha_x[~redo], rtol=1e-4)
 
 
+def test_float32_rows_at_the_step_cap_are_refitted_in_float64_under_the_same_cap(iso_fit):
+    """Unweighted (the sandwich), one LM step, on the scanlines none of which awaits a profile after the
+    float32 search, so that Gauss–Newton's covariance reaches the host as a read-only placeholder: the float32
+    rows that stop at the cap are fitted again in float64 with the same cap and take the float64 fit's numbers
+    to the last digits, σ included; the certified rows keep float32's."""
+    from wardjax.fit import _data as F_data
+    from wardjax.fit import _profile
+    from wardjax.fit import _scanline as F
+
+    _, data, _ = iso_fit
+
+    def search(*args):
+        return F._solve(F_data.validate(*args, None, None), iso=True, normalization="ward1992", solver="fast",
+                        dtype=np.dtype(np.float32), chunk=1024, sandwich=True, steps=F._steps(1))  # fmt: skip
+
+    keep = np.asarray(search(data.f_r, data.wi, data.wo).nonlinear) != _profile.PENDING
+    args = (data.f_r[keep], data.wi[keep], data.wo[keep])
+    raw = search(*args)
+    assert not np.asarray(raw.cov_gn).flags.writeable  # the placeholder the refit must not write into
+    redo = np.isin(raw.status, (wj.Status.MAX_STEPS, wj.Status.NONFINITE))
+    assert 0 < redo.sum() < redo.size
+    res = wj.fit_scanlines(*args, dtype=np.float32, max_steps=1)
+    ref = wj.fit_scanlines(*args, max_steps=1)
+    np.testing.assert_array_equal(res.status[redo], ref.status[redo])
+    for got, want in ((res.params.alpha_x, ref.params.alpha_x), (res.stderr.rho_s, ref.stderr.rho_s)):
+        np.testing.assert_allclose(got[redo], want[redo], rtol=1e-12)
+    np.testing.assert_allclose(res.params.alpha_x[~redo], ref.params.alpha_x[~redo], rtol=1e-3)
+
+
 @pytest.mark.parametrize("n", [5, 59, 64, 127, 128, 200, 1000, 4097])
 def test_padded_samples_leave_the_prepared_scanline_unchanged(rng, n):
     # fit_scanlines pads the sample axis to _shapes.bucket(N) at zero weight and passes N as data, so that

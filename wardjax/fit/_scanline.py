@@ -336,9 +336,10 @@ def fit_scanlines(
     check = errors == "auto"
     # Without weights the residual variance is unknown and may follow the signal: the sandwich.
     sandwich = weights is None and errors != "gauss_newton" and solver == "fast"
-    sol = _solve(data, dtype=dtype, chunk=chunk, check=check, sandwich=sandwich, steps=_steps(max_steps), **kw)
+    kw.update(check=check, sandwich=sandwich, steps=_steps(max_steps))
+    sol = _solve(data, dtype=dtype, chunk=chunk, **kw)
     if dtype == np.float32 and solver == "fast":
-        sol = _refit_uncertified(sol, data, check=check, sandwich=sandwich, **kw)
+        sol = _refit_uncertified(sol, data, **kw)  # the same step cap: float64's result, not a longer fit
     if solver == "fast" and iso and errors != "gauss_newton":
         if errors == "profile":
             sol.nonlinear[sol.status == Status.CONVERGED] = _profile.PENDING
