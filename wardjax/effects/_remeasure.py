@@ -38,7 +38,7 @@ The step
     (lag-1 correlation ≈ 0), noise by another name. Carried on, it took a
     share of the noise: the gap after anisotropy read 0.89–0.92 on three
     untextured captures drawn by Radiance (the desk, the marble, an
-    anisotropic satin), 5–10 SD below 1; with white noise there, 0.97–1.03.
+    anisotropic satin), 7–10 SD below 1; with white noise there, 0.97–1.03.
 """
 
 from __future__ import annotations
