@@ -156,7 +156,7 @@ def capture_data(cap: Capture, *, max_samples: int = 20_000, band_rows: int = 51
     # ... and which the fitted parameters average over many values: their covariance needs its lags too
     standard = None
     if sigma_px > 0 and np.any(c > 0):
-        standard = (np.broadcast_to(c, F.shape).copy(), bin_lag_correlation(sigma_px, bins.b), np.flatnonzero(keep))
+        standard = (c, bin_lag_correlation(sigma_px, bins.b), np.flatnonzero(keep))  # c: (S, N, C), as F
     data = scanline_data(
         F,
         wi,

@@ -96,9 +96,8 @@ _EPS = 1e-4  # the second difference's weight, over the mean precision
 _SAWTOOTH = 1.0  # the 6th difference's weight, over the mean precision (module docstring)
 _RIDGE = 1e-12  # pins the constant height, over the mean precision
 _ROUNDS = 3  # projections onto the height field while the labels change there
-_PERIODIC_MAX = (
-    4096  # pixels up to which the periodic spectral derivative is tried too (its normal equations are dense)
-)
+# pixels up to which the periodic spectral derivative is tried too (its normal equations are dense)
+_PERIODIC_MAX = 4096
 _GN_STEPS = 20  # Levenberg–Marquardt steps on the heights (the 32² renders converge in 5–6)
 
 
