@@ -45,6 +45,7 @@ from ..capture import CAPTURE_FILE, Capture, CaptureError
 from ._floor import floor_biased, floor_fraction
 from ._models import ScanlineData, inv_irradiance, scanline_data
 from ._noise import noise_columns
+from ._pixel_levels import alternative_levels, pixel_levels
 from ._standard_noise import bin_lag_correlation, smoothing_factor, standard_noise
 
 __all__ = ["capture_data"]
@@ -169,4 +170,12 @@ def capture_data(cap: Capture, *, max_samples: int = 20_000, band_rows: int = 51
         censored=cens,
         camera=rig.camera,
     )
+    # the pixel levels behind each value, for a camera response acting on them (wardjax.effects._pixel_levels)
+    binned = lambda img: bin_scanlines(rec._replace(f_r=img, f_clip=None), max_samples).f_r[keep]
+    levels = pixel_levels(cap, setup, rec, binned)
+    enc, extra = cap.config.images.encoding, ("pixel_levels",)
+    if enc in ("srgb", "gamma2.2"):  # the other encoding's reading of each level
+        levels.update(alternative_levels(levels, F, enc))
+        extra += ("encoding_alternative",)
+    data = dataclasses.replace(data, pixels=levels, available=tuple(sorted(data.available + extra)))
     return data if standard is None else dataclasses.replace(data, standard=standard)

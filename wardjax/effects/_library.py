@@ -17,6 +17,7 @@ import numpy as np
 
 from ._effect import Effect, Param
 from ._models import _lobe
+from ._pixel_levels import encoding_from_ratio, encoding_to_ratio
 
 __all__ = ["LIBRARY", "library", "get_effect"]
 
@@ -191,6 +192,45 @@ class GammaMismatch(_ScanlineEffect):
         p = 1.0 / (1.0 + v["eps"])
         f = fs * jnp.exp(p * jnp.log(jnp.maximum(y, 1e-12) / fs))
         return f, p * f / jnp.maximum(y, 1e-12)
+
+
+class EncodingMismatch(_ScanlineEffect):
+    """Image encoding other than declared: sRGB and the pure power 2.2 taken for each other.
+
+    Physics: the two encodings agree within a few per cent in the mid-tones
+    and part in the darks, where sRGB has a linear toe (``12.92 x`` below
+    0.0031308) and the power law none. Files written as ``v^{1/2.2}`` and
+    declared sRGB decode each code ``c`` to ``sRGB⁻¹(c)`` instead of
+    ``c^{2.2}``: with ``E`` the declared encoding and ``D'`` the other one's
+    decoding, the true linear level of a decoded level ``L`` is
+    ``h(L) = D'(E(L))``. A share ``t`` of it::
+
+        g_t(L) = (1 − t) L + t h(L)
+
+    enters the ratio through every pixel level, lit and dark, probe and
+    standard (:mod:`~wardjax.effects._pixel_levels`, where ``h`` is evaluated
+    once per value, so that the effect is linear in ``t``); ``t = 1`` is the
+    other encoding exactly, ``t = 0`` the declared one. A γ mismatch (a power of
+    every level) cannot take its place: the difference bends the darks up
+    (+2 % at 1 % of full scale above a 2 % dark frame) and the mid-tones down
+    (−1.3 % at 10–20 %), an S in ``log f`` that neither a power nor an ambient
+    offset follows. Needs the pixel levels and an encoding with an
+    alternative (``srgb`` or ``gamma2.2``; a linear file has none).
+    Signature: residuals against ``log f``, S-shaped.
+    """
+
+    name = "encoding"
+    title = "image encoding other than declared (sRGB ↔ power 2.2)"
+    side = "measurement"
+    covariate = "log_f"
+    requires = ("encoding_alternative",)
+    params = (Param("t", 0.0, scale=0.5, sign=1, doc="share of the other encoding (1: wholly the other)"),)
+
+    def measure(self, v, f, ctx):
+        return encoding_from_ratio(v["t"], f, ctx)
+
+    def unmeasure(self, v, y, ctx):
+        return encoding_to_ratio(v["t"], y, ctx)
 
 
 class IlluminationGradient(_ScanlineEffect):
@@ -539,6 +579,7 @@ LIBRARY: tuple[Effect, ...] = (
     Saturation(),
     AmbientOffset(),
     GammaMismatch(),
+    EncodingMismatch(),
     IlluminationGradient(),
     SymmetricFalloff(),
     DirectionalEmission(),

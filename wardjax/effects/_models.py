@@ -97,6 +97,12 @@ class ScanlineData(eqx.Module):
         lags and each scanline's bin column ``(S,)``
         (:mod:`~wardjax.effects._standard_noise`); read only by the fitted
         parameters' covariance (:mod:`~wardjax.effects._standard_sigma`).
+    pixels
+        ``None`` or the pixel levels behind each ratio value (a capture's):
+        ``lit_std``, ``dark_std``, ``dark_probe``, ``ref`` ``(S, N, C)``, and
+        for an sRGB or power-2.2 file the other encoding's reading of them
+        (``lit_probe``, ``alt_*``), read by the camera-response effects
+        (:mod:`~wardjax.effects._pixel_levels`).
     """
 
     y: np.ndarray
@@ -109,6 +115,7 @@ class ScanlineData(eqx.Module):
     whiten: np.ndarray | None = None
     levels: tuple | None = None
     standard: tuple | None = None
+    pixels: dict | None = None
     kind: str = eqx.field(static=True, default="ratio")
     f_std: float = eqx.field(static=True, default=0.99 / np.pi)
     available: tuple = eqx.field(static=True, default=())
@@ -441,6 +448,8 @@ class ScanlineModel:
             "f_std": data.f_std,
         }
         ctx.update(data.cov)
+        if data.pixels is not None:
+            ctx.update(data.pixels)
         if data.whiten is not None:  # once per solve, not once per residual evaluation
             ctx["whitened_design"] = _whitened_design(data)
         return ctx
