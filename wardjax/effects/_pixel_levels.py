@@ -130,14 +130,14 @@ def alternative_levels(levels: dict[str, np.ndarray], y: np.ndarray, encoding: s
     }
 
 
-def _dark_level(cap, rec, on: np.ndarray) -> np.ndarray:
-    """``(H, W, 3)`` the dark frame's level at the probe's pixels ``on``: ``G*D · y/(G*y)`` (module docstring)."""
+def _dark_level(cap, f: np.ndarray, on: np.ndarray, box) -> np.ndarray:
+    """The dark frame's level ``G*D · y/(G*y)`` (module docstring) over ``box`` (a crop holding the probe's
+    pixels ``on``, with room for the kernel): ``f`` the reconstructed values there."""
     if cap.dark is None:
-        return np.zeros(rec.f_r.shape)
+        return np.zeros(f.shape)
     from ..reconstruct._smooth import smooth_on
 
     sigma = max(float(cap.config.fit.smooth_standard_px), _DARK_SMOOTH_PX)
-    f = np.asarray(rec.f_r, np.float64)
     ok = on & np.isfinite(f).all(-1)
     texture = f / smooth_on(np.where(ok[..., None], f, 0.0), ok, sigma)
     # the diffuse floor only: across a highlight the ratio is the lobe's curvature, not the texture
@@ -146,7 +146,7 @@ def _dark_level(cap, rec, on: np.ndarray) -> np.ndarray:
         floor = np.nanpercentile(np.where(ok[..., None], f, np.nan), 10, axis=0, keepdims=True)
     diffuse = f <= _FLOOR_SHARE * floor
     texture = np.where(ok[..., None] & diffuse & np.isfinite(texture), np.clip(texture, 0.5, 2.0), 1.0)
-    return smooth_on(np.asarray(cap.dark, np.float64), on, sigma) * texture
+    return smooth_on(np.asarray(cap.dark[box], np.float64), on, sigma) * texture
 
 
 def pixel_levels(cap, setup, rec, bins_of: Callable) -> dict[str, np.ndarray]:
@@ -157,28 +157,33 @@ def pixel_levels(cap, setup, rec, bins_of: Callable) -> dict[str, np.ndarray]:
     bins an ``(H, W, 3)`` image of probe pixels as the values were binned
     (NaN off the probe). The standard's levels are sampled at each probe
     pixel's mirror point, the dark frame's level at the pixel itself
-    (:func:`_dark_level`; 0 without a dark frame), then binned like the values. Bins without a level (the
-    probe covers less than half of them) take the standard's median levels
-    and no dark: such values are masked anyway. ``ref`` is ``ρ_std/π`` per
-    channel.
+    (:func:`_dark_level`; 0 without a dark frame), then binned like the values.
+    Bins without a level (the probe covers less than half of them) take the
+    standard's median levels and no dark: such values are masked anyway.
+    ``ref`` is ``ρ_std/π`` per channel. Only the probe's box (and the
+    smoothing's margin) is worked on.
     """
     from ..geometry import mirror_point, project
     from ..reconstruct import sample_bilinear
+    from ..reconstruct._band import _bbox
 
     kern = setup.kernel
     w, h = (int(v) for v in np.asarray(kern["std_size"]))
     std = np.asarray(kern["std"], np.float64)[:h, :w, :6]
     origin = np.asarray(kern["offset"], np.float64)
-    on = rec.probe & np.isfinite(rec.points).all(-1)
-    uv, _ = project(cap.rig.camera, mirror_point(rec.points[on]))
+    sigma = max(float(cap.config.fit.smooth_standard_px), _DARK_SMOOTH_PX)
+    box = _bbox(rec.probe, int(np.ceil(4 * sigma)) + 2)
+    points = np.asarray(rec.points[box], np.float64)
+    on = rec.probe[box] & np.isfinite(points).all(-1)
+    uv, _ = project(cap.rig.camera, mirror_point(points[on]))
     sampled = sample_bilinear(std, uv - origin)
-    images = {}
-    for name, k in (("lit_std", 0), ("dark_std", 3)):
-        img = np.full(rec.f_r.shape, np.nan)
-        img[on] = sampled[:, k : k + 3]
-        images[name] = img
-    images["dark_probe"] = np.where(on[..., None], _dark_level(cap, rec, on), np.nan)
-    out = {k: bins_of(v) for k, v in images.items()}
+    crops = {"lit_std": sampled[:, 0:3], "dark_std": sampled[:, 3:6]}
+    crops["dark_probe"] = _dark_level(cap, np.asarray(rec.f_r[box], np.float64), on, box)[on]
+    out = {}
+    for name, values in crops.items():
+        img = np.full(rec.f_r.shape, np.nan, np.float32)
+        img[box][on] = values
+        out[name] = np.asarray(bins_of(img), np.float64)
     fill = {"lit_std": float(np.nanmedian(out["lit_std"])), "dark_std": float(np.nanmedian(out["dark_std"]))}
     fill["dark_probe"] = 0.0
     ok = np.all([np.isfinite(v) for v in out.values()], axis=0)
