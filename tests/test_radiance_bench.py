@@ -72,6 +72,28 @@ def test_outcomes_are_read_against_the_truth():
     assert outcome("out", set(), ["fresnel"]) == "named"
 
 
+def test_specular_at_the_reference_angle_carries_the_covariance():
+    """``ρs (1 + κ (1 − cos)^5)`` and its σ from a state's covariance in the optimiser's coordinates (ρs as
+    ``log``, κ linear ×10), against draws of those coordinates mapped through the same function."""
+    from types import SimpleNamespace
+
+    from benchmarks.radiance_bench._bench import _rho_s_at
+
+    rho_s, kappa = 0.0386, 17.6
+    u = np.array([0.0, math.log(rho_s), 0.3, kappa / 10.0])  # another parameter before and after each
+    sd = np.array([0.1, 0.033, 0.2, 0.17])
+    corr = np.eye(4)
+    corr[1, 3] = corr[3, 1] = -0.97  # ρs and κ trade against each other at the angles a capture sees
+    cov = corr * np.outer(sd, sd)
+    values = {"model": {"alpha": 0.09, "rho_s": rho_s}, "ambient": {"a": 0.0}, "fresnel": {"kappa": kappa}}
+    got = _rho_s_at(SimpleNamespace(values=values, cov=cov), 0.5)
+    draws = np.random.default_rng(0).multivariate_normal(u, cov, 200_000)
+    ref = np.exp(draws[:, 1]) * (1 + 10 * draws[:, 3] / 32)
+    assert got["value"] == pytest.approx(rho_s * (1 + kappa / 32), rel=1e-12)
+    assert got["sigma"] == pytest.approx(np.std(ref), rel=0.03)
+    assert got["sigma"] < 0.5 * rho_s * 0.033 * (1 + kappa / 32)  # the anticorrelation narrows it
+
+
 @pytest.mark.slow
 def test_every_case_writes_a_capture_wardjax_loads(tmp_path):
     """Each case's capture loads; its camera puts every pixel on the point the bench's ray hits."""

@@ -5,7 +5,9 @@ Discovery is called as ``wardjax diagnose`` calls it (the capture loaded with
 texture carried, :func:`wardjax.effects.discover` from the isotropic
 baseline). A row holds the truth, what was named first, the verdict, the gap
 before, after the true effect's step and at the end, and z of ρs and α (the
-model-averaged σ) against the truth. Rows are written atomically after every
+model-averaged σ) against the truth; where the Fresnel rise is named on the
+``fresnel`` case, ρs at the scene's reference angle (the scene's ρs is there,
+the library's at normal incidence), with its σ from ρs and κ's covariance. Rows are written atomically after every
 capture, and a rerun skips the captures already in the file.
 """
 
@@ -105,6 +107,8 @@ def run_case(case: str, material: str, texture: str, seed: int, size: tuple[int,
     rho_s_true, ax, ay = comp["truth"]
     av = rep.averaged
     rs, al = av["rho_s"], av.get("alpha") or _geo_alpha(av)
+    if c.fresnel_n and "fresnel" in rep.found:  # the scene's ρs is at its reference angle, the library's at normal
+        rs = _rho_s_at(rep.final, math.cos(math.radians(c.angle)))
     a_true = math.sqrt(ax * ay)
     return {
         "case": case,
@@ -136,6 +140,22 @@ def run_case(case: str, material: str, texture: str, seed: int, size: tuple[int,
         "date": time.strftime("%Y-%m-%d"),
         "load": f"{os.getloadavg()[0]:.1f}",
     }
+
+
+def _rho_s_at(state, cos_ref: float) -> dict:
+    """ρs at the incidence ``cos_ref`` of the Fresnel rise's Schlick form, ``ρs (1 + κ (1 − cos)^5)``, with its σ
+    by the delta method on the fitted state's covariance of ρs and κ (strongly anticorrelated: each alone is
+    pinned far worse than the value at the angles the capture sees)."""
+    from wardjax.effects import get_effect
+
+    flat = [(owner, name) for owner, d in state.values.items() for name in d]
+    i, j = flat.index(("model", "rho_s")), flat.index(("fresnel", "kappa"))
+    rho_s, kappa = state.values["model"]["rho_s"], state.values["fresnel"]["kappa"]
+    d = np.array([rho_s, get_effect("fresnel").params[0].scale])  # d natural / d u: ρs is log, κ linear
+    cov = np.asarray(state.cov)[np.ix_([i, j], [i, j])] * np.outer(d, d)
+    c = (1.0 - cos_ref) ** 5
+    grad = np.array([1.0 + kappa * c, rho_s * c])
+    return {"value": rho_s * (1.0 + kappa * c), "sigma": float(np.sqrt(grad @ cov @ grad))}
 
 
 def _geo_alpha(av: dict) -> dict:
