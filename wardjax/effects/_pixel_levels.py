@@ -139,7 +139,8 @@ def _dark_level(cap, f: np.ndarray, on: np.ndarray, box) -> np.ndarray:
 
     sigma = max(float(cap.config.fit.smooth_standard_px), _DARK_SMOOTH_PX)
     ok = on & np.isfinite(f).all(-1)
-    texture = f / smooth_on(np.where(ok[..., None], f, 0.0), ok, sigma)
+    with np.errstate(divide="ignore", invalid="ignore"):  # a level of 0 (black) has no texture to read: 1 below
+        texture = f / smooth_on(np.where(ok[..., None], f, 0.0), ok, sigma)
     # the diffuse floor only: across a highlight the ratio is the lobe's curvature, not the texture
     with warnings.catch_warnings():  # columns off the probe have no floor: all NaN
         warnings.simplefilter("ignore", RuntimeWarning)
