@@ -170,7 +170,7 @@ def capture_data(cap: Capture, *, max_samples: int = 20_000, band_rows: int = 51
         censored=cens,
         camera=rig.camera,
     )
-    # the pixel levels behind each value, for a camera response acting on them (wardjax.effects._pixel_levels)
+    # the pixel levels behind each value, for the encoding effect (wardjax.effects._pixel_levels)
     binned = lambda img: bin_scanlines(rec._replace(f_r=img, f_clip=None), max_samples).f_r[keep]
     levels = pixel_levels(cap, setup, rec, binned)
     enc, extra = cap.config.images.encoding, ("pixel_levels",)

@@ -101,7 +101,7 @@ class ScanlineData(eqx.Module):
         ``None`` or the pixel levels behind each ratio value (a capture's):
         ``lit_std``, ``dark_std``, ``dark_probe``, ``ref`` ``(S, N, C)``, and
         for an sRGB or power-2.2 file the other encoding's reading of them
-        (``lit_probe``, ``alt_*``), read by the camera-response effects
+        (``lit_probe``, ``alt_*``), read by the encoding effect
         (:mod:`~wardjax.effects._pixel_levels`).
     """
 

@@ -35,9 +35,10 @@ times the texture the lit frame shows at that pixel, ``D̄_p = G*D · y/(G*y)``
 (``G`` a Gaussian of the standard's smoothing, at least 1.5 px): its noise is
 the lit value's relative noise times ``D_p``, a tenth of the dark pixel's.
 
-A power of every level (a camera response acting on lit and dark frames
-alike) would need the same level, and weights the dark frame's noise by
-``(D_p/L_p)^{−ε}`` besides; the library's γ acts on the ratios alone.
+The library's γ acts on the ratios alone (``f_std (f/f_std)^{1+ε}``); a power
+of every level, lit and dark, would be a camera's response more exactly (on
+the Radiance bench's power response the ratio form leaves ρs 2.5–3 % low), but
+is not in the library.
 
 The levels are measured by :func:`pixel_levels` for the values of a capture
 (:func:`~wardjax.effects.capture_data`) and carried in
