@@ -84,13 +84,16 @@ _AMBIGUOUS_BIC = 6.0  # a confusable runner-up within this ΔBIC of the winner i
 # effects whose signatures one capture may not tell apart: a lamp field follows image position, anisotropy the
 # half-vector azimuth, the Fresnel rise the incidence angle, and across one capture's scanlines they covary (on
 # textured captures the Fresnel rise, one parameter, took the ramp across the image); a camera response compresses
-# the highlight against each channel's diffuse floor, which a per-channel specular scale mimics
+# the highlight against each channel's diffuse floor, which a per-channel specular scale mimics; a mis-declared
+# encoding lifts the darks, as light from the room in the lit frame does
 _CONFUSABLE = {
     "illumination_gradient": ("anisotropy", "fresnel"),
     "anisotropy": ("illumination_gradient",),
     "fresnel": ("illumination_gradient",),
     "gamma": ("coloured_specular",),
     "coloured_specular": ("gamma",),
+    "ambient": ("encoding",),
+    "encoding": ("ambient",),
 }
 
 

@@ -195,6 +195,8 @@ _SEPARATE = {
     "Fresnel rise follows the incidence angle, the illumination the image position",
     frozenset({"gamma", "coloured_specular"}): "a grey chart in the frame or a second exposure would: a camera "
     "response bends every level, the diffuse floor too; a coloured specular scales the lobe alone",
+    frozenset({"ambient", "encoding"}): "a second exposure would: light from the room scales with the lamp's "
+    "light at any exposure, an encoding bends each level by its code, so its share of the darks moves",
 }
 
 
