@@ -49,6 +49,7 @@ from __future__ import annotations
 
 import warnings
 from collections.abc import Callable
+from typing import cast
 
 import jax.numpy as jnp
 import numpy as np
@@ -115,8 +116,8 @@ def alternative_levels(levels: dict[str, np.ndarray], y: np.ndarray, encoding: s
 
     other = {"srgb": "gamma2.2", "gamma2.2": "srgb"}[encoding]
 
-    def h(x):
-        return decode_values(encode_values(np.clip(x, 1e-6, 1.0), encoding), other)
+    def h(x) -> np.ndarray:
+        return np.asarray(decode_values(encode_values(np.clip(x, 1e-6, 1.0), encoding), other), np.float64)
 
     ls, ds, dp, s = (levels[k] for k in ("lit_std", "dark_std", "dark_probe", "ref"))
     lp = np.clip(dp + np.where(np.isfinite(y), y, 0.0) * (ls - ds) / s, 1e-6, 1.0)
@@ -178,7 +179,7 @@ def pixel_levels(cap, setup, rec, bins_of: Callable) -> dict[str, np.ndarray]:
     points = np.asarray(rec.points[box], np.float64)
     on = rec.probe[box] & np.isfinite(points).all(-1)
     uv, _ = project(cap.rig.camera, mirror_point(points[on]))
-    sampled = sample_bilinear(std, uv - origin)
+    sampled = cast(np.ndarray, sample_bilinear(std, uv - origin))  # (n, 6): no ``reduce_max``, one array
     crops = {"lit_std": sampled[:, 0:3], "dark_std": sampled[:, 3:6]}
     crops["dark_probe"] = _dark_level(cap, np.asarray(rec.f_r[box], np.float64), on, box)[on]
     out = {}
