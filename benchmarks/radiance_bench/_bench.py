@@ -7,8 +7,9 @@ baseline). A row holds the truth, what was named first, the verdict, the gap
 before, after the true effect's step and at the end, and z of ρs and α (the
 model-averaged σ) against the truth; where the Fresnel rise is named on the
 ``fresnel`` case, ρs at the scene's reference angle (the scene's ρs is there,
-the library's at normal incidence), with its σ from ρs and κ's covariance. Rows are written atomically after every
-capture, and a rerun skips the captures already in the file.
+the library's at normal incidence), with its σ from ρs and κ's covariance.
+Rows are written atomically after every capture, and a rerun skips the
+captures already in the file.
 """
 
 from __future__ import annotations
