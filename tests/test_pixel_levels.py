@@ -125,7 +125,7 @@ def _scanline_case(t_true: float, seed: int):
     data = scanline_data(y, sim.wi, sim.wo, sigma, points=sim.points, rho_standard=0.99)
     levels = {"lit_std": ls, "dark_std": ds, "dark_probe": dp, "ref": np.full(shape, s)}
     levels.update(alternative_levels(levels, y, "srgb"))
-    avail = tuple(sorted(data.available + ("encoding_alternative", "pixel_levels")))
+    avail = tuple(sorted(data.available + ("encoding_alternative",)))
     return dataclasses.replace(data, pixels=levels, available=avail)
 
 

@@ -157,7 +157,7 @@ def pixel_levels(cap, setup, rec, bins_of: Callable) -> dict[str, np.ndarray]:
 
     ``setup`` is the reconstruction's first pass (the standard cropped and
     smoothed as the ratio used it), ``rec`` the reconstruction; ``bins_of``
-    bins an ``(H, W, 3)`` image of probe pixels as the values were binned
+    bins an ``(H, W, K)`` image of probe pixels as the values were binned
     (NaN off the probe). The standard's levels are sampled at each probe
     pixel's mirror point, the dark frame's level at the pixel itself
     (:func:`_dark_level`; 0 without a dark frame), then binned like the values.
@@ -180,13 +180,11 @@ def pixel_levels(cap, setup, rec, bins_of: Callable) -> dict[str, np.ndarray]:
     on = rec.probe[box] & np.isfinite(points).all(-1)
     uv, _ = project(cap.rig.camera, mirror_point(points[on]))
     sampled = cast(np.ndarray, sample_bilinear(std, uv - origin))  # (n, 6): no ``reduce_max``, one array
-    crops = {"lit_std": sampled[:, 0:3], "dark_std": sampled[:, 3:6]}
-    crops["dark_probe"] = _dark_level(cap, np.asarray(rec.f_r[box], np.float64), on, box)[on]
-    out = {}
-    for name, values in crops.items():
-        img = np.full(rec.f_r.shape, np.nan, np.float32)
-        img[box][on] = values
-        out[name] = np.asarray(bins_of(img), np.float64)
+    dark = _dark_level(cap, np.asarray(rec.f_r[box], np.float64), on, box)[on]
+    img = np.full((*rec.f_r.shape[:2], 9), np.nan, np.float32)  # the three levels' channels, binned in one pass
+    img[box][on] = np.concatenate([sampled, dark], axis=-1)
+    both = np.asarray(bins_of(img), np.float64)
+    out = {"lit_std": both[..., 0:3], "dark_std": both[..., 3:6], "dark_probe": both[..., 6:9]}
     fill = {"lit_std": float(np.nanmedian(out["lit_std"])), "dark_std": float(np.nanmedian(out["dark_std"]))}
     fill["dark_probe"] = 0.0
     ok = np.all([np.isfinite(v) for v in out.values()], axis=0)
