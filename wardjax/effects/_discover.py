@@ -75,6 +75,7 @@ from ._search import _Search, _View
 from ._standard_sigma import standard_deflated, widened_report
 from ._step_record import flat as _flat
 from ._step_record import make_step, plot_sampler
+from ._structure import _binned_test
 from ._texture_term import identity_whitened, with_texture
 from ._verdict import unexplained_structure
 
@@ -132,6 +133,35 @@ class _Steps:
             return False
         self.variogram_gap = got[0]
         return True
+
+    def unsigned(self, structure_p: float) -> None:
+        """Where a gap beyond the noise remains, take back the last named effect while the final residuals still
+        follow its own telling covariate (binned test at ``structure_p`` over the covariates, as the verdict's).
+
+        An effect that is present, once fitted, leaves no structure against the covariate its signature is written
+        in (the half-vector azimuth for anisotropy, the predicted level for a response); with the rest of the gap
+        left to an effect outside the library its covariate is clean. Where that covariate still shows structure
+        beyond the noise after the effect is fitted, the effect took part of a discrepancy whose form is not its
+        own (room light, which scales the highlight with the lamp's share of the light, read as anisotropy): it is
+        reported as a partial match, not named, and the model before it is the final one.
+        """
+        search = self.cur_search
+        while self.found and search is not None:
+            cur, name = self.cur, self.found[-1]
+            effect = next(e for e in search.testable if e.name == name)
+            if effect.covariate not in cur.covs:
+                return
+            mask = search.mask
+            r = _flat(cur.r.reshape(np.shape(cur.pred)), mask)
+            chi2, bins, p, *_ = _binned_test(r, _flat(cur.covs[effect.covariate], mask))
+            if not p < structure_p / max(len(cur.covs), 1):
+                return
+            step = self.steps.pop()
+            self.found.pop()
+            self.states.pop()
+            self.partial.append(dataclasses.replace(step.evidence, signature=(effect.covariate, chi2, bins, p)))
+            self.ambiguous = [a for a in self.ambiguous if a[0] != name]
+            self.cur = search.residual_view(self.states[-1])
 
     def _noise_v(self, gap: float | None, st: FitState) -> bool:
         """The stop rule on the ``gap`` the variogram's covariance read for ``st``'s model (same dof)."""
@@ -362,10 +392,13 @@ def discover(
     sample = plot_sampler(search.mask, n_plot, seed) if keep_plot_data else None
     run = _Steps(cur)
     stopped = run.search(search, max_steps, alpha, min_explained, structure_p, stop_within_noise, sample, progress)
+    # the verdict follows the gap (_verdict), under either of the texture's covariances, as the stop rule does
+    st = run.cur.state
+    within = stopped or _gap_p(st.chi2, st.dof) >= structure_p or run.final_within(structure_p)
+    if not within:  # a gap remains: an effect named on it must have matched its own signature
+        run.unsigned(structure_p)
     cur, states, found, steps, partial = run.cur, run.states, run.found, run.steps, run.partial
     mask, st = search.mask, cur.state
-    # the verdict follows the gap (_verdict), under either of the texture's covariances, as the stop rule does
-    within = stopped or _gap_p(st.chi2, st.dof) >= structure_p or run.final_within(structure_p)
     r_flat, covs = _flat(cur.r.reshape(np.shape(cur.pred)), mask), {k: _flat(x, mask) for k, x in cur.covs.items()}
     unexplained, structure = unexplained_structure(r_flat, covs, st, partial, structure_p, within)
     base_st, final_st, steps = widened_report(search, run.cur_search or search, states[0], cur.state, steps)

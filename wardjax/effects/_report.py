@@ -116,6 +116,12 @@ class Candidate:
         predicting the other half (:mod:`wardjax.effects._holdout`); read for
         the winner of each step, ``None`` for the others and where the data
         have too few scanlines.
+    signature
+        ``(covariate, χ², bins, p)``: the binned test of the final residuals
+        against the effect's own telling covariate, read where the effect was
+        named but a gap beyond the noise remained; set where that structure
+        was significant and the effect therefore not named (``None``
+        otherwise; :meth:`~wardjax.effects._discover._Steps.unsigned`).
     variogram
         :class:`VariogramRead`: the model with the effect (and the model
         without it) refitted under the texture's covariance from the
@@ -141,6 +147,7 @@ class Candidate:
     design_effect: float = 1.0
     variogram: VariogramRead | None = None
     holdout: HoldoutRead | None = None
+    signature: tuple[str, float, int, float] | None = None
 
     @property
     def converged(self) -> bool:
@@ -149,8 +156,10 @@ class Candidate:
     def as_dict(self) -> dict:
         v = {} if self.variogram is None else self.variogram._asdict()
         h = {} if self.holdout is None else self.holdout._asdict()
+        sig = {} if self.signature is None else dict(zip(("covariate", "chi2", "bins", "p"), self.signature))
         return (
             {f"{k}_variogram": _num(x) for k, x in v.items()}
+            | {f"signature_{k}": _num(x) for k, x in sig.items()}
             | {f"holdout_{k}": _num(x) for k, x in h.items()}
             | {
                 k: _num(getattr(self, k))

@@ -42,8 +42,9 @@ def unexplained_structure(
     st
         The final fitted state.
     rejected
-        Winners not named: partial matches (supported, explaining too little)
-        and winners that did not predict held-out scanlines.
+        Winners not named: partial matches (supported, explaining too little),
+        winners that did not predict held-out scanlines, and effects whose own
+        covariate kept its structure once they were fitted.
     structure_p
         Level (Bonferroni over the covariates) of the binned tests.
     within_noise
@@ -71,6 +72,14 @@ def unexplained_structure(
     ]
     lines += flagged
     for c in rejected:
+        if c.signature is not None:
+            name, chi2, bins, p = c.signature
+            lines.append(
+                f"{c.effect} is supported (ΔBIC = {c.delta_bic:.1f}) but, fitted, leaves its own covariate {name} "
+                f"with structure (binned χ² = {chi2:.1f} on {bins} bins, p = {p:.1e}): the discrepancy is not of its "
+                "form, not named"
+            )
+            continue
         if c.holdout is not None and not c.holdout.passed:
             lines.append(
                 f"{c.effect} fits this capture (ΔBIC = {c.delta_bic:.1f}) but does not predict held-out "
