@@ -117,11 +117,12 @@ class Candidate:
         the winner of each step, ``None`` for the others and where the data
         have too few scanlines.
     signature
-        ``(covariate, χ², bins, p)``: the binned test of the final residuals
-        against the effect's own telling covariate, read where the effect was
-        named but a gap beyond the noise remained; set where that structure
-        was significant and the effect therefore not named (``None``
-        otherwise; :meth:`~wardjax.effects._discover._Steps.unsigned`).
+        ``(covariate, χ², bins, p, left)``: the binned test of the residuals
+        against the effect's own telling covariate once it is fitted, and the
+        share of that covariate's structure (``χ² − bins``) it ``left``; set
+        where the effect was named on a gap that stayed beyond the noise and
+        was taken back because its own covariate kept its structure (``None``
+        otherwise; ``_Steps.unsigned`` in :mod:`wardjax.effects._discover`).
     variogram
         :class:`VariogramRead`: the model with the effect (and the model
         without it) refitted under the texture's covariance from the
@@ -147,7 +148,7 @@ class Candidate:
     design_effect: float = 1.0
     variogram: VariogramRead | None = None
     holdout: HoldoutRead | None = None
-    signature: tuple[str, float, int, float] | None = None
+    signature: tuple[str, float, int, float, float] | None = None
 
     @property
     def converged(self) -> bool:
@@ -156,7 +157,7 @@ class Candidate:
     def as_dict(self) -> dict:
         v = {} if self.variogram is None else self.variogram._asdict()
         h = {} if self.holdout is None else self.holdout._asdict()
-        sig = {} if self.signature is None else dict(zip(("covariate", "chi2", "bins", "p"), self.signature))
+        sig = {} if self.signature is None else dict(zip(("covariate", "chi2", "bins", "p", "left"), self.signature))
         return (
             {f"{k}_variogram": _num(x) for k, x in v.items()}
             | {f"signature_{k}": _num(x) for k, x in sig.items()}

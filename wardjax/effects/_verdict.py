@@ -73,11 +73,11 @@ def unexplained_structure(
     lines += flagged
     for c in rejected:
         if c.signature is not None:
-            name, chi2, bins, p = c.signature
+            name, chi2, bins, p, left = c.signature
             lines.append(
-                f"{c.effect} is supported (ΔBIC = {c.delta_bic:.1f}) but, fitted, leaves its own covariate {name} "
-                f"with structure (binned χ² = {chi2:.1f} on {bins} bins, p = {p:.1e}): the discrepancy is not of its "
-                "form, not named"
+                f"{c.effect} is supported (ΔBIC = {c.delta_bic:.1f}) but, fitted, leaves {100 * left:.0f} % of the "
+                f"structure against its own covariate {name} (binned χ² = {chi2:.1f} on {bins} bins, p = {p:.1e}): "
+                "the discrepancy is not of its form, not named"
             )
             continue
         if c.holdout is not None and not c.holdout.passed:
