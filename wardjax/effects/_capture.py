@@ -173,9 +173,10 @@ def capture_data(cap: Capture, *, max_samples: int = 20_000, band_rows: int = 51
     # the pixel levels behind each value, for the encoding effect (wardjax.effects._pixel_levels)
     binned = lambda img: bin_scanlines(rec._replace(f_r=img, f_clip=None), max_samples).f_r[keep]
     levels = pixel_levels(cap, setup, rec, binned)
+    dark = (levels.pop("dark_pixel"), levels.pop("dark_room")) if cap.dark is not None else None
     enc, extra = cap.config.images.encoding, ()
     if enc in ("srgb", "gamma2.2"):  # the other encoding's reading of each level
         levels.update(alternative_levels(levels, F, enc))
         extra = ("encoding_alternative",)
-    data = dataclasses.replace(data, pixels=levels, available=tuple(sorted(data.available + extra)))
+    data = dataclasses.replace(data, pixels=levels, dark=dark, available=tuple(sorted(data.available + extra)))
     return data if standard is None else dataclasses.replace(data, standard=standard)

@@ -103,6 +103,12 @@ class ScanlineData(eqx.Module):
         for an sRGB or power-2.2 file the other encoding's reading of them
         (``lit_probe``, ``alt_*``), read by the encoding effect
         (:mod:`~wardjax.effects._pixel_levels`).
+    dark
+        ``(D, R)`` or ``None``: the dark frame's level at each value's probe
+        pixels ``D`` and the room's light under it ``R`` (the dark frame
+        smoothed over 10 px), ``(S, N, C)`` each, binned as the values (a
+        capture with a dark frame); read only by the texture's check
+        (:mod:`~wardjax.effects._dark_texture`).
     """
 
     y: np.ndarray
@@ -116,6 +122,7 @@ class ScanlineData(eqx.Module):
     levels: tuple | None = None
     standard: tuple | None = None
     pixels: dict | None = None
+    dark: tuple | None = None
     kind: str = eqx.field(static=True, default="ratio")
     f_std: float = eqx.field(static=True, default=0.99 / np.pi)
     available: tuple = eqx.field(static=True, default=())

@@ -57,6 +57,7 @@ import numpy as np
 __all__ = ["alternative_levels", "encoding_from_ratio", "encoding_to_ratio", "pixel_levels"]
 
 _DARK_SMOOTH_PX = 1.5  # the dark frame's level: smoothed at least this much (Gaussian SD, pixels)
+_ROOM_PX = 10.0  # the room's light on the probe: the dark frame smoothed this much (Gaussian SD, pixels)
 _FLOOR_SHARE = 1.5  # a lit value up to this times its column's 10th percentile shows the texture, not the lobe
 _TINY = 1e-9  # the standard's lit − dark is clamped here: a division, never by zero
 
@@ -132,6 +133,13 @@ def alternative_levels(levels: dict[str, np.ndarray], y: np.ndarray, encoding: s
     }
 
 
+def _smooth_on(img: np.ndarray, on: np.ndarray, sigma: float) -> np.ndarray:
+    """``img`` ``(h, w, C)`` smoothed by a Gaussian of SD ``sigma`` px over the pixels ``on`` alone."""
+    from ..reconstruct._smooth import smooth_on
+
+    return np.asarray(smooth_on(np.where(on[..., None], img, 0.0), on, sigma), np.float64)
+
+
 def _dark_level(cap, f: np.ndarray, on: np.ndarray, box) -> np.ndarray:
     """The dark frame's level ``G*D · y/(G*y)`` (module docstring) over ``box`` (a crop holding the probe's
     pixels ``on``, with room for the kernel): ``f`` the reconstructed values there."""
@@ -153,7 +161,9 @@ def _dark_level(cap, f: np.ndarray, on: np.ndarray, box) -> np.ndarray:
 
 
 def pixel_levels(cap, setup, rec, bins_of: Callable) -> dict[str, np.ndarray]:
-    """The levels of every value of a capture: ``lit_std``, ``dark_std``, ``dark_probe``, ``ref`` ``(S, N, C)``.
+    """The levels of every value of a capture: ``lit_std``, ``dark_std``, ``dark_probe``, ``ref`` ``(S, N, C)``;
+    and the dark frame's pixels at the probe, ``dark_pixel``, with the room's light under them, ``dark_room``
+    (the dark frame smoothed over ``_ROOM_PX``), for the texture's check (:mod:`~wardjax.effects._dark_texture`).
 
     ``setup`` is the reconstruction's first pass (the standard cropped and
     smoothed as the ratio used it), ``rec`` the reconstruction; ``bins_of``
@@ -181,12 +191,15 @@ def pixel_levels(cap, setup, rec, bins_of: Callable) -> dict[str, np.ndarray]:
     uv, _ = project(cap.rig.camera, mirror_point(points[on]))
     sampled = cast(np.ndarray, sample_bilinear(std, uv - origin))  # (n, 6): no ``reduce_max``, one array
     dark = _dark_level(cap, np.asarray(rec.f_r[box], np.float64), on, box)[on]
-    img = np.full((*rec.f_r.shape[:2], 9), np.nan, np.float32)  # the three levels' channels, binned in one pass
-    img[box][on] = np.concatenate([sampled, dark], axis=-1)
+    raw = np.zeros((*on.shape, 3)) if cap.dark is None else np.asarray(cap.dark[box], np.float64)
+    room = raw if cap.dark is None else _smooth_on(raw, on, _ROOM_PX)
+    img = np.full((*rec.f_r.shape[:2], 15), np.nan, np.float32)  # the five levels' channels, binned in one pass
+    img[box][on] = np.concatenate([sampled, dark, raw[on], room[on]], axis=-1)
     both = np.asarray(bins_of(img), np.float64)
     out = {"lit_std": both[..., 0:3], "dark_std": both[..., 3:6], "dark_probe": both[..., 6:9]}
+    out |= {"dark_pixel": both[..., 9:12], "dark_room": both[..., 12:15]}
     fill = {"lit_std": float(np.nanmedian(out["lit_std"])), "dark_std": float(np.nanmedian(out["dark_std"]))}
-    fill["dark_probe"] = 0.0
+    fill |= {"dark_probe": 0.0, "dark_pixel": 0.0, "dark_room": 0.0}
     ok = np.all([np.isfinite(v) for v in out.values()], axis=0)
     out = {k: np.where(ok, v, fill[k]) for k, v in out.items()}
     rho = np.broadcast_to(np.asarray(kern["rho"], np.float64), (3,))

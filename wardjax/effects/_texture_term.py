@@ -14,6 +14,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from ._dark_texture import dark_refutes
 from ._levels import level_whitening, relative_levels
 from ._noise import noise_columns
 from ._texture import (
@@ -69,6 +70,11 @@ def with_texture(data, pred: np.ndarray, rho: np.ndarray | None = None, variogra
     nu = white_noise_share(lags)
     fit.acov, nu = joint_autocovariance(e, off, nu, lags, _VARIOGRAM_WINDOW if variogram else 1.0)
     tex_var = np.array([fit.acov[c * n, c * n] for c in range(c_n)])
+    mean_level = np.array([np.mean(pred[..., c][m[..., c]]) for c in range(c_n)])
+    # the dark frame holds the probe's texture under the room's light, and none of the lamp's misfit
+    dark = dark_refutes(data, e, off, pred, tex_var / np.maximum(mean_level, 1e-30) ** 2)
+    if dark is not None and dark["refuted"]:
+        return None
     # a white-noise floor keeps the whitening well conditioned where the texture term took all the variance
     nu = np.maximum(nu, _NOISE_FLOOR * tex_var)
     # its shape in level and irradiance from lag-1 differences over all values (the highlight's shot noise), the
@@ -78,11 +84,12 @@ def with_texture(data, pred: np.ndarray, rho: np.ndarray | None = None, variogra
     sigma = np.where(m, fit.sigma(pred, w), 1.0)
     W = texture_whitening(fit, sigma, exact)
     new = dataclasses.replace(data, sigma=sigma, whiten=W)
-    mean_level = np.array([np.mean(pred[..., c][m[..., c]]) for c in range(c_n)])
     summary: dict = {
         "amplitude": [float(v) for v in np.sqrt(tex_var) / np.maximum(mean_level, 1e-30)],
         "rho": [float(fit.acov[c * n, c * n + 1] / max(tex_var[c], 1e-300)) for c in range(c_n)],
     }
+    if dark is not None:
+        summary["dark_shown"] = [dark["shown"], dark["se"]]
     lv = _levels(data, rho, m)
     if lv is None:  # no term, in the layout that has one (one compiled program for every fit of the run)
         return dataclasses.replace(new, levels=_no_levels(data)), summary, CrossTexture(y, off, W, sigma, exact)
