@@ -190,6 +190,12 @@ def test_capture_levels_reproduce_the_capture(tmp_path):
     diff = np.abs(lp - binned)[m]
     assert np.median(diff) < 0.002 and np.max(diff) < 0.01, (np.median(diff), np.max(diff))
     assert np.median(lp[m]) > 5 * np.median(diff)  # the levels are far above that noise
+    # the dark frame's own pixels (the texture's check): with them the level formed from y is the lit frame's
+    # to rounding, as the ratio subtracted exactly these; the room's light under them is the ambient's level
+    d, room = data.dark
+    raw = d + y * (p["lit_std"] - p["dark_std"]) / p["ref"]
+    np.testing.assert_allclose(raw[m], binned[m], rtol=0, atol=1e-12)
+    assert 0.4 * 0.02 * 0.7 < np.median(room[m]) < 0.4 * 0.02 * 1.3
 
 
 @pytest.mark.slow  # a Radiance render and a discovery: a minute on two cores
