@@ -38,12 +38,11 @@ import math
 
 import numpy as np
 
-__all__ = ["dark_refutes", "dark_shows_texture"]
+__all__ = ["dark_refutes"]
 
 _SHOWN = 0.25  # a texture is refuted where the dark frame shows less than this share of it, by 3 SE
 _MIN_VALUES = 8  # a scanline's channel enters with at least this many values off the highlight
 _MIN_SCANLINES = 8  # and the check with at least this many such scanlines
-_FLOOR_SHARE = 1.5  # a value up to this times its scanline's 10th percentile is on the diffuse floor
 
 
 def dark_refutes(data, resid: np.ndarray, off: np.ndarray, pred: np.ndarray, claim: np.ndarray) -> dict | None:
@@ -88,41 +87,3 @@ def dark_refutes(data, resid: np.ndarray, off: np.ndarray, pred: np.ndarray, cla
     shown = float(np.sum(wt * np.asarray(shares)) / np.sum(wt))
     se = float(1.0 / math.sqrt(np.sum(wt)))
     return {"shown": shown, "se": se, "refuted": bool(shown + 3.0 * se < _SHOWN)}
-
-
-def dark_shows_texture(data) -> bool | None:
-    """Whether the lit and the dark frame share fine structure on the diffuse floor: a texture is there to carry.
-
-    Before any fit: the lit level behind each value ``L = D + y span`` and the dark level ``D``, each as its
-    relative step to the next sample along the scanline (a smooth field and the lamp's falloff cancel), on
-    the diffuse floor (values up to 1.5 × the scanline's 10th percentile). Their covariance, averaged over the
-    scanlines (SE from the spread between them), is 0 where the two frames share nothing but is the texture's
-    relative variance at the sample step where the probe is textured. ``True`` above 3 SE, ``False`` not;
-    ``None`` without a dark frame or with too few scanlines. It only chooses which compiled program the
-    baseline is fitted in (:func:`~wardjax.effects._discover._baseline`), not whether a texture is carried.
-    """
-    dark, px = getattr(data, "dark", None), getattr(data, "pixels", None)
-    if dark is None or px is None:
-        return None
-    d, room = (np.asarray(x, np.float64) for x in dark)
-    y, m = np.asarray(data.y, np.float64), np.asarray(data.mask)
-    span = (np.asarray(px["lit_std"]) - np.asarray(px["dark_std"])) / np.asarray(px["ref"])
-    with np.errstate(invalid="ignore"):
-        floor = np.nanquantile(np.where(m, y, np.nan), 0.1, axis=1, keepdims=True)
-    lit = d + np.where(m, y, np.nan) * span
-    ok = m & (y <= _FLOOR_SHARE * floor) & (room > 0) & (lit > 0)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        a = np.diff(lit, axis=1) / lit[:, 1:]
-        b = np.diff(d, axis=1) / room[:, 1:]
-    both = ok[:, 1:] & ok[:, :-1] & np.isfinite(a) & np.isfinite(b)
-    covs = []
-    for s in range(y.shape[0]):
-        for c in range(y.shape[-1]):
-            u = both[s, :, c]
-            if u.sum() >= _MIN_VALUES:
-                covs.append(float(np.mean(a[s, u, c] * b[s, u, c])))
-    if len(covs) < _MIN_SCANLINES:
-        return None
-    cv = np.asarray(covs)
-    se = float(np.std(cv, ddof=1) / math.sqrt(len(cv)))
-    return bool(se > 0 and cv.mean() > 3.0 * se)

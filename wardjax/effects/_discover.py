@@ -64,7 +64,6 @@ import numpy as np
 from threadpoolctl import threadpool_limits
 
 from ._candidates import _deflated, _rank_candidates, _rechecked
-from ._dark_texture import dark_shows_texture
 from ._effect import Effect
 from ._evidence import _NOISE_Z, _gap_p, _lr_p, _within_noise
 from ._holdout import Holdout
@@ -276,18 +275,16 @@ def _baseline(model, data, testable, lm_steps: int, chunk: int, texture: bool):
     With the texture to be carried, the baseline that measures it is fitted
     under an identity whitening: the same numbers as white noise and the same
     compiled program as every fit after it (one program to trace and compile
-    per run, not two: ~3 s of tracing even with the compile cache warm) —
-    unless the dark frame shows no texture before any fit
-    (:func:`~wardjax.effects._dark_texture.dark_shows_texture`), where the
-    texture is likely refused and the white-noise program is the one kept. The
+    per run, not two: ~3 s of tracing even with the compile cache warm). The
     baseline under the texture's covariance is then refitted from that fit
-    (its multi-start chose the basin), not from every start again.
+    (its multi-start chose the basin), not from every start again. Where no
+    texture is found, or the dark frame refutes it, the run stays in the
+    identity's layout: its dense product per evaluation cost nothing
+    measurable on a 320 × 240 capture, the plain layout's second program
+    20 s of a cold run's compiling (56 → 38 s).
     """
     carry = texture and model.kind == "scanline" and getattr(data, "kind", None) in ("ratio", "brdf")
-    # where the dark frame shows no texture before any fit, the texture is likely refused: the baseline under
-    # white noise, whose program the run then keeps (one compile; an untextured 320 × 240 capture compiled two)
-    ident = carry and dark_shows_texture(data) is not False
-    plain = _Search(model, identity_whitened(data) if ident else data, testable, lm_steps, chunk)
+    plain = _Search(model, identity_whitened(data) if carry else data, testable, lm_steps, chunk)
     plain.warm_view()  # its program compiles while the baseline's fits compile theirs
     cur = plain.residual_view(_fit_baseline(plain))
 
@@ -309,8 +306,8 @@ def _baseline(model, data, testable, lm_steps: int, chunk: int, texture: bool):
     if not carry:
         return _with_holdout(plain), cur, None
     search, tex = textured(cur.pred, cur.rho)
-    if tex is None:  # no texture: the plain data (the identity costs a dense product per evaluation)
-        return (_with_holdout(make(data)) if ident else search), cur, None
+    if tex is None:  # no texture: white noise in the identity's layout, the program the baseline compiled
+        return search, cur, None
     search.remeasure = TextureRemeasure(plain, textured)
     # from the white-noise baseline, where the multi-start found its basin: one start, not all of them again
     return search, search.residual_view(TextureRemeasure.refit(search, cur.state)), tex
