@@ -2,12 +2,11 @@
 
 Two scanline draws of the hidden-effect bench's geometry (8 scanlines × 128 samples × RGB), each with an effect
 outside the library, written here: a tone curve with a shoulder (linear below a knee, a power above it), which
-retroreflection stands in for, and a stripe along the scanlines beside a present anisotropy. The first is taken
-back, the second stays named.
+retroreflection stands in for, and a stripe along the scanlines beside a present anisotropy. Neither is taken
+back: what either leaves is not concentrated along the named effect's own covariate.
 """
 
 import numpy as np
-import pytest
 
 from benchmarks import hidden_effects as bench
 from wardjax.effects import ScanlineModel, discover, scanline_data
@@ -40,18 +39,16 @@ def _draw(seed: int, *, knee: float | None = None, power: float = 0.0, aniso: fl
     )
 
 
-def test_a_stand_in_for_an_outside_effect_is_taken_back():
-    """Retroreflection lowers χ² by about half on the shoulder's data (ΔBIC in the thousands), but the residuals
-    against its own covariate ψ keep about a fifth of their structure: it is reported as a partial match, with
-    the share it left, and nothing is named."""
+def test_a_misfit_spread_over_every_covariate_takes_nothing_back():
+    """On the shoulder's data retroreflection lowers χ² by about half and leaves about a fifth of the structure
+    against its own covariate ψ, but no more there than against the other covariates (the misfit projects onto
+    every one alike, as Ward's does on CUReT samples): it stays named, and the verdict says structure remains.
+    Where what is left lies along its own covariate (room light read as anisotropy, twelve times the others'),
+    it is taken back: ``tests/test_radiance_bench.py::test_room_light_is_not_named_as_anisotropy``."""
     rep = discover(ScanlineModel(), _draw(0, knee=0.3, power=-0.15), keep_plot_data=False)
-    assert rep.found == [] and "retroreflection" in rep.partial, (rep.found, rep.partial)
-    assert rep.verdict().startswith("unexplained discrepancy")
-    line = next(s for s in rep.unexplained if s.startswith("retroreflection"))
-    assert "own covariate psi" in line and "not named" in line
-    left = float(line.split("leaves ")[1].split(" %")[0]) / 100
-    assert 0.1 < left < 0.6
-    assert rep.final.chi2 == pytest.approx(rep.baseline.chi2, rel=1e-9)  # the final model is the one before it
+    assert rep.found[:1] == ["retroreflection"], (rep.found, rep.partial)
+    assert "structure remains" in rep.verdict()
+    assert rep.gap[1] < 0.6 * rep.gap[0]
 
 
 def test_a_present_effect_beside_an_outside_one_stays_named():

@@ -87,6 +87,11 @@ __all__ = ["discover"]
 # gaps 1.26–3.4 after it); an effect standing in for one outside the library 17–41 % (room light read as anisotropy
 # on a Radiance capture, 17 %; a tone curve's shoulder read as retroreflection, 22–41 %).
 _SIGNATURE_LEFT = 0.1
+# ... and only where what is left lies along that covariate: its binned χ² more than this times the median of the
+# other covariates'. A misfit of the model elsewhere projects onto every covariate alike: on CUReT samples, whose
+# Ward misfit dwarfs any effect (gaps 15–30 after it), a Fresnel rise or retroreflection left 13–42 % of its
+# covariate's structure at 0.8–1.2 times the others'; room light read as anisotropy left 12 times the others'.
+_ALONG = 3.0
 _AMBIGUOUS_BIC = 6.0  # a confusable runner-up within this ΔBIC of the winner is named too (Kass & Raftery: < 6)
 # effects whose signatures one capture may not tell apart: a lamp field follows image position, anisotropy the
 # half-vector azimuth, the Fresnel rise the incidence angle, and across one capture's scanlines they covary (on
@@ -143,14 +148,16 @@ class _Steps:
     def unsigned(self, structure_p: float) -> None:
         """Where a gap beyond the noise remains, take back the last named effect while the final residuals still
         follow its own telling covariate: significant there (binned test at ``structure_p`` over the covariates, as
-        the verdict's) and more than :data:`_SIGNATURE_LEFT` of that covariate's structure before it was fitted.
+        the verdict's), more than :data:`_SIGNATURE_LEFT` of that covariate's structure before it was fitted, and
+        concentrated there (:data:`_ALONG`).
 
         An effect that is present, once fitted, leaves next to nothing against the covariate its signature is
         written in (the half-vector azimuth for anisotropy, the predicted level for a response), even with an
-        effect outside the library beside it: that effect's residual only projects onto the covariate. Where a
-        sizeable share of the structure along its own covariate is left after it is fitted, the effect took part
-        of a discrepancy whose form is not its own: it is reported as a partial match, not named, and the model
-        before it is the final one.
+        effect outside the library beside it: that effect's residual only projects onto the covariate, as onto
+        every other (:data:`_ALONG`). Where a sizeable share of the structure along its own covariate is left
+        after it is fitted, and more there than along the others, the effect took part of a discrepancy whose
+        form is not its own: it is reported as a partial match, not named, and the model before it is the final
+        one.
         """
         search = self.cur_search
         while self.found and search is not None:
@@ -159,12 +166,13 @@ class _Steps:
             if covariate not in cur.covs:
                 return
             before = search.residual_view(self.states[-2])
-            (chi2, bins, p, *_), (chi2_0, bins_0, *_) = (
-                _binned_test(_flat(v.r.reshape(np.shape(v.pred)), search.mask), _flat(v.covs[covariate], search.mask))
-                for v in (cur, before)
-            )
+            r_after, r_before = (_flat(v.r.reshape(np.shape(v.pred)), search.mask) for v in (cur, before))
+            tests = {k: _binned_test(r_after, _flat(x, search.mask)) for k, x in cur.covs.items()}
+            chi2, bins, p, *_ = tests[covariate]
+            chi2_0, bins_0, *_ = _binned_test(r_before, _flat(before.covs[covariate], search.mask))
             left = (chi2 - bins) / max(chi2_0 - bins_0, 1e-300)
-            if not (p < structure_p / max(len(cur.covs), 1) and left > _SIGNATURE_LEFT):
+            others = float(np.median([t[0] for k, t in tests.items() if k != covariate] or [np.inf]))
+            if not (p < structure_p / max(len(tests), 1) and left > _SIGNATURE_LEFT and chi2 > _ALONG * others):
                 return
             step = self.steps.pop()
             self.found.pop()
