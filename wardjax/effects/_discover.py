@@ -145,11 +145,11 @@ class _Steps:
         self.variogram_gap = got[0]
         return True
 
-    def unsigned(self, structure_p: float) -> None:
-        """Where a gap beyond the noise remains, take back the last named effect while the final residuals still
-        follow its own telling covariate: significant there (binned test at ``structure_p`` over the covariates, as
-        the verdict's), more than :data:`_SIGNATURE_LEFT` of that covariate's structure before it was fitted, and
-        concentrated there (:data:`_ALONG`).
+    def unsigned(self, structure_p: float, within: bool) -> None:
+        """Where a gap beyond the noise remains (not ``within``), take back the last named effect while the final
+        residuals still follow its own telling covariate: significant there (binned test at ``structure_p`` over the
+        covariates, as the verdict's), more than :data:`_SIGNATURE_LEFT` of that covariate's structure before it
+        was fitted, and concentrated there (:data:`_ALONG`).
 
         An effect that is present, once fitted, leaves next to nothing against the covariate its signature is
         written in (the half-vector azimuth for anisotropy, the predicted level for a response), even with an
@@ -160,7 +160,7 @@ class _Steps:
         one.
         """
         search = self.cur_search
-        while self.found and search is not None:
+        while not within and self.found and search is not None:
             cur, name = self.cur, self.found[-1]
             covariate = next(e for e in search.testable if e.name == name).covariate
             if covariate not in cur.covs:
@@ -380,10 +380,8 @@ def discover(
         past the cap; the others are reported as lower bounds. 20 steps: most
         candidates converge within it, and the few that crawl (a second lobe
         or retroreflection far from the data) no longer cost the run.
-    keep_plot_data
-        Keep residuals and covariates (≤ 20,000 points) for the plots.
-    seed
-        Seeds the subsample kept for plots.
+    keep_plot_data, seed
+        Keep residuals and covariates (≤ 20,000 points, a subsample seeded by ``seed``) for the plots.
     stop_within_noise
         Stop rule: once an effect has closed the gap to within what noise
         alone gives, ``χ² − dof ≤ 2 √(2 dof)`` (two SDs of χ² under the noise
@@ -415,10 +413,8 @@ def discover(
     run = _Steps(cur)
     stopped = run.search(search, max_steps, alpha, min_explained, structure_p, stop_within_noise, sample, progress)
     # the verdict follows the gap (_verdict), under either of the texture's covariances, as the stop rule does
-    st = run.cur.state
-    within = stopped or _gap_p(st.chi2, st.dof) >= structure_p or run.final_within(structure_p)
-    if not within:  # a gap remains: an effect named on it must have matched its own signature
-        run.unsigned(structure_p)
+    within = stopped or _gap_p(run.cur.state.chi2, run.cur.state.dof) >= structure_p or run.final_within(structure_p)
+    run.unsigned(structure_p, within)  # a gap remains: an effect named on it must have matched its own signature
     cur, states, found, steps, partial = run.cur, run.states, run.found, run.steps, run.partial
     mask, st = search.mask, cur.state
     r_flat, covs = _flat(cur.r.reshape(np.shape(cur.pred)), mask), {k: _flat(x, mask) for k, x in cur.covs.items()}
