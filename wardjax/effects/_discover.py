@@ -165,14 +165,17 @@ class _Steps:
             covariate = next(e for e in search.testable if e.name == name).covariate
             if covariate not in cur.covs:
                 return
-            before = search.residual_view(self.states[-2])
-            r_after, r_before = (_flat(v.r.reshape(np.shape(v.pred)), search.mask) for v in (cur, before))
+            r_after = _flat(cur.r.reshape(np.shape(cur.pred)), search.mask)
             tests = {k: _binned_test(r_after, _flat(x, search.mask)) for k, x in cur.covs.items()}
             chi2, bins, p, *_ = tests[covariate]
+            others = float(np.median([t[0] for k, t in tests.items() if k != covariate] or [np.inf]))
+            if not (p < structure_p / max(len(tests), 1) and chi2 > _ALONG * others):
+                return
+            before = search.residual_view(self.states[-2])  # only where the cheap tests did not settle it
+            r_before = _flat(before.r.reshape(np.shape(before.pred)), search.mask)
             chi2_0, bins_0, *_ = _binned_test(r_before, _flat(before.covs[covariate], search.mask))
             left = (chi2 - bins) / max(chi2_0 - bins_0, 1e-300)
-            others = float(np.median([t[0] for k, t in tests.items() if k != covariate] or [np.inf]))
-            if not (p < structure_p / max(len(tests), 1) and left > _SIGNATURE_LEFT and chi2 > _ALONG * others):
+            if not left > _SIGNATURE_LEFT:
                 return
             step = self.steps.pop()
             self.found.pop()
