@@ -211,3 +211,59 @@ def test_radiance_capture_written_as_power_and_declared_srgb_names_the_encoding(
     assert row["first"] == "encoding", row
     assert 0.9 <= float(row["gap_true"]) <= 1.1, row
     assert abs(float(row["z_rho_s"])) < 3 and abs(float(row["z_alpha"])) < 3, row
+
+
+def _response_case(k: float, rng):
+    """Every true level raised to ``k`` (a camera's response on the lit and the dark frame alike): the decoded
+    levels, the ratio ``y`` the reconstruction forms of them, and the true ratio ``f``."""
+    s = 0.99 / np.pi
+    e_lit_p, e_dark_p, e_lit_s, e_dark_s, f_over_s = _physical(rng, (3, 40, 3))
+    lp, dp, ls, ds = (e**k for e in (e_lit_p, e_dark_p, e_lit_s, e_dark_s))
+    y = s * (lp - dp) / (ls - ds)
+    ctx = {"lit_std": ls, "dark_std": ds, "dark_probe": dp, "ref": np.full(ls.shape, s)}
+    return y, s * f_over_s, ctx, s
+
+
+def test_a_response_on_every_level_gives_the_true_ratio_back():
+    """γ on a capture's levels: ``unmeasure`` of the ratio of levels raised to 1.12 is the true ratio, ``measure``
+    of the true ratio the observed one, both to rounding; the ratio's power ``f_std (f/f_std)^{1+ε}`` is off by
+    per cents there (the dark frame is subtracted after the response), and with the flag off it is what γ gives."""
+    gamma = get_effect("gamma")
+    y, f, levels, s = _response_case(1.12, np.random.default_rng(8))
+    v = {"eps": 0.12}
+    with jax.enable_x64(True):
+        ctx = {k: jnp.asarray(x) for k, x in levels.items()} | {"f_std": s, "response_levels": jnp.ones(())}
+        back, dfdy = gamma.unmeasure(v, jnp.asarray(y), ctx)
+        fwd = gamma.measure(v, jnp.asarray(f), ctx)
+        ratio_only = gamma.measure(v, jnp.asarray(f), ctx | {"response_levels": jnp.zeros(())})
+        plain = gamma.measure(v, jnp.asarray(f), {"f_std": s})
+        moved, _ = gamma.unmeasure(v, jnp.asarray(y * (1 + 1e-6)), ctx)
+    np.testing.assert_allclose(np.asarray(back), f, rtol=1e-12)
+    np.testing.assert_allclose(np.asarray(fwd), y, rtol=1e-12)
+    np.testing.assert_allclose(np.asarray(dfdy), (np.asarray(moved) - f) / (y * 1e-6), rtol=1e-4)
+    np.testing.assert_allclose(np.asarray(ratio_only), np.asarray(plain), rtol=1e-14)
+    assert np.max(np.abs(np.asarray(plain) / y - 1)) > 0.02  # what the levels are there for
+    # a black dark frame: every level's power is the ratio's (to the clamp of levels at 10⁻⁹)
+    with jax.enable_x64(True):
+        black = {k: jnp.asarray(x) for k, x in levels.items()} | {"f_std": s, "response_levels": jnp.ones(())}
+        black |= {"dark_std": jnp.zeros(y.shape), "dark_probe": jnp.zeros(y.shape)}
+        np.testing.assert_allclose(np.asarray(gamma.measure(v, jnp.asarray(f), black)), s * (f / s) ** 1.12, rtol=1e-6)
+
+
+def test_the_texture_term_puts_the_response_back_on_the_ratio(tmp_path):
+    """Where the probe's texture is carried the response acts on the ratio (the dark level holds the texture):
+    the textured search's levels say so, the capture's own say every level."""
+    from wardjax.effects._capture import capture_data
+    from wardjax.effects._texture_term import _ratio_response
+
+    cap = wj.simulate_capture(
+        wj.WardParams(rho_d=(0.4, 0.4, 0.4), rho_s=0.05, alpha_x=0.12, alpha_y=0.12),
+        tmp_path / "cap",
+        seed=4,
+        image_size=(64, 48),
+        texture="none",
+    )
+    px = capture_data(cap, max_samples=5_000).pixels
+    assert float(px["response_levels"]) == 1.0
+    assert float(_ratio_response(px)["response_levels"]) == 0.0 and float(px["response_levels"]) == 1.0
+    assert _ratio_response(None) is None
