@@ -64,6 +64,7 @@ import numpy as np
 from threadpoolctl import threadpool_limits
 
 from ._candidates import _deflated, _rank_candidates, _rechecked
+from ._discrepancy import discrepancy
 from ._effect import Effect
 from ._evidence import _NOISE_Z, _gap_p, _lr_p, _within_noise
 from ._holdout import Holdout
@@ -209,11 +210,12 @@ class _Steps:
             if ranked is None:
                 break
             cands, by_effect = ranked
-            win = cands[0]
+            win, ranked_bic = cands[0], cands[0].delta_bic  # ΔBIC on the runners-up's scale (one covariance)
             read = _reread(search, cur, win, by_effect, remaining)  # the covariance where the leader cannot hide
             if read is not None:
                 search, cur, win, summary = read
-                cands = [win if c.effect == win.effect else c for c in cands]  # the model averaging reads it there
+                # the model averaging reads its fit there, weighed on the runners-up's scale
+                cands = [dataclasses.replace(win, delta_bic=ranked_bic) if c.effect == win.effect else c for c in cands]
             # the smoothed standard's shared noise (wardjax.effects._standard_sigma)
             win = standard_deflated(search, win)
             if not (win.delta_bic > 0 and win.p_value * len(remaining) < alpha):
@@ -236,11 +238,11 @@ class _Steps:
                     self.partial.append(win)
                     break
             self.ambiguous += [
-                (win.effect, c.effect, win.delta_bic - c.delta_bic)
+                (win.effect, c.effect, ranked_bic - c.delta_bic)
                 for c in cands[1:]
                 if c.effect in _CONFUSABLE.get(win.effect, ())
                 and c.delta_bic > 0
-                and win.delta_bic - c.delta_bic < _AMBIGUOUS_BIC
+                and ranked_bic - c.delta_bic < _AMBIGUOUS_BIC
             ]
             i_win = next(i for i in remaining if testable[i].name == win.effect)
             new = search.residual_view(win.state if read is not None else by_effect[i_win])
@@ -419,9 +421,7 @@ def discover(
     within = stopped or _gap_p(run.cur.state.chi2, run.cur.state.dof) >= structure_p or run.final_within(structure_p)
     run.unsigned(structure_p, within)  # a gap remains: an effect named on it must have matched its own signature
     cur, states, found, steps, partial = run.cur, run.states, run.found, run.steps, run.partial
-    mask, st = search.mask, cur.state
-    r_flat, covs = _flat(cur.r.reshape(np.shape(cur.pred)), mask), {k: _flat(x, mask) for k, x in cur.covs.items()}
-    unexplained, structure = unexplained_structure(r_flat, covs, st, partial, structure_p, within)
+    unexplained, structure, disc = _final_reading(run, search.mask, structure_p, within)
     base_st, final_st, steps = widened_report(search, run.cur_search or search, states[0], cur.state, steps)
     return DiscoveryReport(
         model=getattr(model, "title", type(model).__name__),
@@ -453,4 +453,17 @@ def discover(
             "stopped_within_noise": stopped,
             "variogram_gap": run.variogram_gap,
         },
+        discrepancy=disc,
     )
+
+
+def _final_reading(run: _Steps, mask, structure_p: float, within: bool):
+    """The verdict's lines and binned tests for the final model (:mod:`wardjax.effects._verdict`), and where a gap
+    beyond the noise remains (not ``within``) the discrepancy term's reading (:mod:`wardjax.effects._discrepancy`),
+    else ``None``: ``(unexplained, structure, discrepancy)``."""
+    cur = run.cur
+    r_flat, covs = _flat(cur.r.reshape(np.shape(cur.pred)), mask), {k: _flat(x, mask) for k, x in cur.covs.items()}
+    unexplained, structure = unexplained_structure(r_flat, covs, cur.state, run.partial, structure_p, within)
+    if within or run.cur_search is None:
+        return unexplained, structure, None
+    return unexplained, structure, discrepancy(run.cur_search, cur.state, r_flat, covs, structure)

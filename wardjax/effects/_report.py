@@ -262,6 +262,10 @@ class DiscoveryReport:
         Effects strongly supported but explaining too little to be named.
     baseline, final
         The fitted baseline and final models (:class:`FitState`).
+    discrepancy
+        Where a gap beyond the noise remains, the discrepancy term that widens
+        the parameters' σ (:mod:`~wardjax.effects._discrepancy`): ``covariate``,
+        ``bins``, ``tau``, ``sigma`` per parameter; else ``None``.
     ambiguous
         ``(named, other, ΔBIC difference)`` where an effect with a different
         signature explained the step almost as well (illumination
@@ -289,6 +293,7 @@ class DiscoveryReport:
     seconds: float
     settings: dict
     ambiguous: list = dataclasses.field(default_factory=list)
+    discrepancy: dict | None = None
 
     # ---------------------------------------------------------------- summaries
     @property
@@ -306,7 +311,7 @@ class DiscoveryReport:
         """The model's ρs and α averaged over the last step's candidate models by their evidence: ``value``,
         ``sigma`` (with the model choice's spread) and ``sigma_model`` (the chosen model's); see
         :mod:`wardjax.effects._averaging`."""
-        return model_averaged(self.steps, self.baseline)
+        return model_averaged(self.steps, self.baseline, self.ambiguous, self.discrepancy)
 
     def _under(self) -> str:
         """Where the variogram's covariance read the final gap: the words that say so, else nothing."""
@@ -365,6 +370,9 @@ class DiscoveryReport:
                 "dof": self.final.dof,
             },
             "averaged": {k: {n: _num(v) for n, v in d.items()} for k, d in self.averaged.items()},
+            "discrepancy": None
+            if self.discrepancy is None
+            else {k: _num(v) if isinstance(v, float) else v for k, v in self.discrepancy.items()},
             "unexplained": list(self.unexplained),
             "partial": list(self.partial),
             "ambiguous": [{"named": a, "or": b, "delta_bic_difference": _num(d)} for a, b, d in self.ambiguous],
@@ -441,7 +449,8 @@ class DiscoveryReport:
                     f"{k} = {_fmt(d['value'], d['sigma'])} (chosen model: ± {d['sigma_model']:.2g})"
                     for k, d in av.items()
                 )
-                + " — averaged over the last step's models by their evidence (weights ∝ exp(ΔBIC/2)).\n"
+                + " — averaged over the last step's models by their evidence (weights ∝ exp(ΔBIC/2); the named "
+                "model and those not told apart from it alike).\n"
             )
         if self.ambiguous:
             L.append("\n## Not told apart\n")
@@ -456,6 +465,17 @@ class DiscoveryReport:
             if self.unexplained
             else "None: the residuals are consistent with the noise against every covariate."
         )
+        if self.discrepancy is not None:
+            d, av = self.discrepancy, self.averaged
+            L.append(
+                f"\nThe parameters' σ include the discrepancy (a level per bin of {d['covariate']}, "
+                f"{d['bins']} bins, SD τ = {d['tau']:.3g} σ of the noise, from the binned χ² above its bins): "
+                + ", ".join(
+                    f"{k} = {_fmt(v['value'], v['sigma'])} (the discrepancy's share ± {v['sigma_discrepancy']:.2g})"
+                    for k, v in av.items()
+                )
+                + ".\n"
+            )
         if self.not_detectable:
             L.append("\n## Not detectable from these data\n")
             L.extend(f"- {n}: {w}" for n, w in self.not_detectable)

@@ -14,6 +14,17 @@ from scipy.special import chdtrc  # χ² survival function (what scipy.stats.chi
 _N_BINS = 20
 
 
+def quantile_bins(x: np.ndarray, n_bins: int = _N_BINS) -> tuple[np.ndarray, int]:
+    """Each value's bin ``(n,)`` and the number of bins: ``n_bins`` quantile bins of ``x`` (finite, ``(n,)``; fewer
+    where there are few values), or one bin per value of a categorical covariate such as the channel."""
+    nb = int(max(2, min(n_bins, x.size // 4)))
+    ux = np.unique(x)
+    if ux.size <= nb:
+        return np.searchsorted(ux, x), int(ux.size)
+    edges = np.quantile(x, np.linspace(0, 1, nb + 1))
+    return np.clip(np.searchsorted(edges, x, side="right") - 1, 0, nb - 1), nb
+
+
 def _binned_test(r, x, n_bins=_N_BINS):
     """Structure of whitened residuals ``r`` against covariate ``x``: (χ², dof, p, bin centres, means, sems).
 
@@ -23,15 +34,7 @@ def _binned_test(r, x, n_bins=_N_BINS):
     """
     ok = np.isfinite(r) & np.isfinite(x)
     r, x = r[ok], x[ok]
-    n = r.size
-    nb = int(max(2, min(n_bins, n // 4)))
-    ux = np.unique(x)
-    if ux.size <= nb:  # categorical covariate (channel)
-        bins = np.searchsorted(ux, x)
-        nb = ux.size
-    else:
-        edges = np.quantile(x, np.linspace(0, 1, nb + 1))
-        bins = np.clip(np.searchsorted(edges, x, side="right") - 1, 0, nb - 1)
+    bins, nb = quantile_bins(x, n_bins)
     cnt = np.bincount(bins, minlength=nb).astype(float)
     s = np.bincount(bins, weights=r, minlength=nb)
     keep = cnt > 0

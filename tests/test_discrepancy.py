@@ -1,0 +1,73 @@
+"""The discrepancy term (``wardjax.effects._discrepancy``): drawn as it assumes — a level per quantile bin of the
+half-vector angle, each ``N(0, τ²)`` in units of the noise σ, added to Ward scanlines — its τ is read back, and
+the parameters' σ with it cover the truth where the fit's own σ do not."""
+
+import numpy as np
+
+import wardjax as wj
+from wardjax.effects import ScanlineModel, discover, scanline_data
+
+TRUTH = {"rho_s": 0.06, "alpha": 0.09}
+
+
+def _case(seed: int, tau: float):
+    params = wj.WardParams(rho_d=(0.2, 0.3, 0.5), rho_s=TRUTH["rho_s"], alpha_x=TRUTH["alpha"], alpha_y=TRUTH["alpha"])
+    sim = wj.simulate_scanlines(params, x_offsets=np.linspace(-20, 20, 12), n_samples=64, noise_rel=0.0, seed=seed)
+    rng = np.random.default_rng(seed)
+    f = np.asarray(sim.f_true)
+    sigma = 0.01 * f + 1e-4
+    h = np.asarray(sim.wi) + np.asarray(sim.wo)
+    theta_h = np.degrees(np.arctan2(np.hypot(h[..., 0], h[..., 1]), h[..., 2]))  # (S, N), the verdict's covariate
+    edges = np.quantile(theta_h, np.linspace(0, 1, 21))
+    b = np.clip(np.searchsorted(edges, theta_h, side="right") - 1, 0, 19)
+    levels = tau * rng.standard_normal(20)
+    delta = levels[b][..., None]  # the same level on every channel of a bin
+    y = f + sigma * (delta + rng.standard_normal(f.shape))
+    return scanline_data(y, sim.wi, sim.wo, sigma, points=sim.points, rho_standard=0.99), levels
+
+
+def test_the_discrepancy_is_read_back_and_covers_the_truth():
+    """Eight draws at τ = 3 (in noise σ): on each τ̂ is the SD of the 20 levels drawn within 15 %, on the covariate
+    they were drawn along; z against the truth with the discrepancy's σ within ±4 on every draw, where the fit's
+    own σ leave some beyond ±6 (the bins' levels move ρs and α by many of their σ)."""
+    z_with, z_without = [], []
+    for seed in range(8):
+        data, levels = _case(seed, 3.0)
+        rep = discover(ScanlineModel(), data, effects=(), max_steps=0)
+        d = rep.discrepancy
+        assert d is not None and rep.unexplained, (rep.gap, rep.unexplained)
+        assert d["covariate"] == "theta_h" and abs(d["tau"] / np.std(levels) - 1) < 0.15, (d, np.std(levels))
+        av = rep.averaged
+        for k, truth in TRUTH.items():
+            v = av[k]
+            assert abs(v["sigma"] ** 2 / (v["sigma_model"] ** 2 + v["sigma_discrepancy"] ** 2) - 1) < 1e-12
+            z_with.append((v["value"] - truth) / v["sigma"])
+            z_without.append((v["value"] - truth) / v["sigma_model"])
+    assert np.max(np.abs(z_with)) < 4, z_with
+    assert np.max(np.abs(z_without)) > 6, z_without
+
+
+def test_no_discrepancy_where_the_gap_is_within_the_noise():
+    rep = discover(ScanlineModel(), _case(0, 0.0)[0], effects=(), max_steps=0)
+    assert rep.discrepancy is None and not rep.unexplained, rep.gap
+    assert all(v["sigma_discrepancy"] == 0.0 for v in rep.averaged.values())
+
+
+def test_the_whitened_jacobian_is_the_back_whitening_undone():
+    """Under a texture's whitening the term needs ``∂r/∂u`` itself; the program gives ``Wᵀ ∂r/∂u``. ``unback``
+    undoes :func:`_back_whiten_columns` in both of its layouts, to rounding."""
+    import jax
+    import jax.numpy as jnp
+
+    from wardjax.effects._discrepancy import unback
+    from wardjax.effects._gls import _back_whiten_columns
+
+    rng = np.random.default_rng(2)
+    s_n, n, c_n, k = 3, 7, 3, 2
+    cols = rng.standard_normal((s_n, n, c_n, k))
+    joint = np.tril(rng.standard_normal((s_n, c_n * n, c_n * n))) + 4 * np.eye(c_n * n)
+    per = np.tril(rng.standard_normal((s_n, c_n, n, n))) + 4 * np.eye(n)
+    with jax.enable_x64(True):
+        for W in (joint, per):
+            back = np.asarray(_back_whiten_columns(jnp.asarray(W), jnp.asarray(cols)))
+            np.testing.assert_allclose(unback(W, back), cols, rtol=1e-10, atol=1e-12)
