@@ -220,9 +220,6 @@ class _Steps:
             win = standard_deflated(search, win)
             if not (win.delta_bic > 0 and win.p_value * len(remaining) < alpha):
                 break
-            if read is not None:  # the step stands under the new covariance: the model before it too
-                self.states[-1] = cur.state
-                self.textures.append(read[3])
             hold = None if search.holdout is None else search.holdout(cur.state, win.state, win.delta_chi2)
             if hold is not None:
                 win = dataclasses.replace(win, holdout=hold)
@@ -237,6 +234,9 @@ class _Steps:
                 if v is None or not v.names(win.k, search.ln_n, win.design_effect, min_explained, structure_p):
                     self.partial.append(win)
                     break
+            if read is not None:  # the step stands under the new covariance: the model before it too
+                self.states[-1] = cur.state
+                self.textures.append(read[3])
             self.ambiguous += [
                 (win.effect, c.effect, ranked_bic - c.delta_bic)
                 for c in cands[1:]
@@ -459,11 +459,11 @@ def discover(
 
 def _final_reading(run: _Steps, mask, structure_p: float, within: bool):
     """The verdict's lines and binned tests for the final model (:mod:`wardjax.effects._verdict`), and where a gap
-    beyond the noise remains (not ``within``) the discrepancy term's reading (:mod:`wardjax.effects._discrepancy`),
-    else ``None``: ``(unexplained, structure, discrepancy)``."""
+    beyond the noise remains (not ``within``) on scanline data the discrepancy term's reading
+    (:mod:`wardjax.effects._discrepancy`), else ``None``: ``(unexplained, structure, discrepancy)``."""
     cur = run.cur
     r_flat, covs = _flat(cur.r.reshape(np.shape(cur.pred)), mask), {k: _flat(x, mask) for k, x in cur.covs.items()}
     unexplained, structure = unexplained_structure(r_flat, covs, cur.state, run.partial, structure_p, within)
-    if within or run.cur_search is None:
+    if within or run.cur_search is None or run.cur_search.model.kind != "scanline":
         return unexplained, structure, None
     return unexplained, structure, discrepancy(run.cur_search, cur.state, r_flat, covs, structure)
