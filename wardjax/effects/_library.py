@@ -17,7 +17,7 @@ import numpy as np
 
 from ._effect import Effect, Param
 from ._models import _lobe
-from ._pixel_levels import encoding_from_ratio, encoding_to_ratio, response_from_ratio, response_to_ratio
+from ._pixel_levels import encoding_from_ratio, encoding_to_ratio
 
 __all__ = ["LIBRARY", "library", "get_effect"]
 
@@ -174,11 +174,6 @@ class GammaMismatch(_ScanlineEffect):
 
     The rig's symmetry does not remove it: it bends the response about the
     standard's level. The smartphone paper assumes γ = 2.2 (section 3.1).
-    That is exact where the dark frame is black. A capture's values carry
-    their pixel levels (:mod:`~wardjax.effects._pixel_levels`), and there the
-    power acts on every level, lit and dark, before the dark frame is
-    subtracted — the camera's response does — except where the probe's
-    texture is carried (the dark level holds the texture; see there).
     Signature: residuals linear in ``log f`` (predicted intensity).
     """
 
@@ -190,20 +185,13 @@ class GammaMismatch(_ScanlineEffect):
 
     def measure(self, v, f, ctx):
         fs = ctx["f_std"]
-        y = fs * jnp.exp((1.0 + v["eps"]) * jnp.log(jnp.maximum(f, 1e-12) / fs))
-        if "response_levels" not in ctx:
-            return y
-        return jnp.where(ctx["response_levels"] > 0, response_from_ratio(v["eps"], f, ctx), y)
+        return fs * jnp.exp((1.0 + v["eps"]) * jnp.log(jnp.maximum(f, 1e-12) / fs))
 
     def unmeasure(self, v, y, ctx):
         fs = ctx["f_std"]
         p = 1.0 / (1.0 + v["eps"])
         f = fs * jnp.exp(p * jnp.log(jnp.maximum(y, 1e-12) / fs))
-        if "response_levels" not in ctx:
-            return f, p * f / jnp.maximum(y, 1e-12)
-        levels = ctx["response_levels"] > 0
-        fl, dl = response_to_ratio(v["eps"], y, ctx)
-        return jnp.where(levels, fl, f), jnp.where(levels, dl, p * f / jnp.maximum(y, 1e-12))
+        return f, p * f / jnp.maximum(y, 1e-12)
 
 
 class EncodingMismatch(_ScanlineEffect):

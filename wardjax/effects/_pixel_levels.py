@@ -1,4 +1,4 @@
-"""The pixel levels behind each reconstructed value, and an encoding mismatch or a camera response applied to them.
+"""The pixel levels behind each reconstructed value, and an encoding mismatch applied to them.
 
 A reconstructed value is a ratio of dark-subtracted pixels (image-based
 paper, eq. "f_r,measured"), with ``s = ρ_std/π`` per channel::
@@ -35,19 +35,10 @@ times the texture the lit frame shows at that pixel, ``D̄_p = G*D · y/(G*y)``
 (``G`` a Gaussian of the standard's smoothing, at least 1.5 px): its noise is
 the lit value's relative noise times ``D_p``, a tenth of the dark pixel's.
 
-A camera response other than declared is a power of every level,
-``L = T^{1+ε}`` for a true level ``T``, lit and dark alike: with
-``g(L) = L^{1/(1+ε)}`` in the same two formulas (:func:`response_to_ratio`,
-:func:`response_from_ratio`; exact, no expansion). Without a dark frame it
-is the ratio's power ``s (f/s)^{1+ε}``, the library's γ on values without
-levels; with one it is not: on the Radiance bench's power response (1.12, a
-dark frame at 2 % of full scale) the ratio's power left ρs 3 % low (−15 σ),
-every level's 0.3 %. Where the probe's texture is carried it is the ratio's
-power again (``response_levels`` 0, set by
-:func:`~wardjax.effects._texture_term.with_texture`): the dark level holds the
-texture the lit level does, and a power of both reads their ratio, which has
-none — at ``1+ε`` = 1.5 an untouched Radiance wood desk (room light 2 %) took
-it as the texture's explanation, ρs 30 % low.
+The library's γ acts on the ratios alone (``f_std (f/f_std)^{1+ε}``); a power
+of every level, lit and dark, would be a camera's response more exactly (on
+the Radiance bench's power response the ratio form leaves ρs 2.5–3 % low), but
+is not in the library.
 
 The levels are measured by :func:`pixel_levels` for the values of a capture
 (:func:`~wardjax.effects.capture_data`) and carried in
@@ -63,14 +54,7 @@ from typing import cast
 import jax.numpy as jnp
 import numpy as np
 
-__all__ = [
-    "alternative_levels",
-    "encoding_from_ratio",
-    "encoding_to_ratio",
-    "pixel_levels",
-    "response_from_ratio",
-    "response_to_ratio",
-]
+__all__ = ["alternative_levels", "encoding_from_ratio", "encoding_to_ratio", "pixel_levels"]
 
 _DARK_SMOOTH_PX = 1.5  # the dark frame's level: smoothed at least this much (Gaussian SD, pixels)
 _ROOM_PX = 10.0  # the room's light on the probe: the dark frame smoothed this much (Gaussian SD, pixels)
@@ -120,32 +104,6 @@ def encoding_from_ratio(t, f, ctx):
     gls, gds, gdp, g0, dg = _alternative(t, ctx)
     lp = ctx["lit_probe"] + (gdp + f / s * (gls - gds) - g0) / dg
     return s * (lp - dp) / jnp.maximum(ls - ds, _TINY)
-
-
-def _power(x, p):
-    """``x^p`` for levels clamped at :data:`_TINY` (a level at or below zero has no power: the clamp keeps its
-    gradient finite where the value is masked)."""
-    return jnp.exp(p * jnp.log(jnp.maximum(x, _TINY)))
-
-
-def response_to_ratio(eps, y, ctx):
-    """The ratio ``f`` ``(S, N, C)`` the true levels ``T = L^{1/(1+ε)}`` give for observed ratios ``y``, and
-    ``df/dy`` (module docstring)."""
-    ls, ds, dp, s = _levels(ctx)
-    p = 1.0 / (1.0 + eps)
-    span = jnp.maximum(ls - ds, _TINY)
-    lp = dp + y * span / s
-    den = jnp.maximum(_power(ls, p) - _power(ds, p), _TINY)
-    return s * (_power(lp, p) - _power(dp, p)) / den, p * _power(lp, p - 1.0) * span / den
-
-
-def response_from_ratio(eps, f, ctx):
-    """The ratio ``y`` ``(S, N, C)`` observed for true ratios ``f`` when every level is the true one raised to
-    ``1 + ε``."""
-    ls, ds, dp, s = _levels(ctx)
-    p = 1.0 / (1.0 + eps)
-    true_lit = _power(dp, p) + f / s * (_power(ls, p) - _power(ds, p))
-    return s * (_power(true_lit, 1.0 + eps) - dp) / jnp.maximum(ls - ds, _TINY)
 
 
 def alternative_levels(levels: dict[str, np.ndarray], y: np.ndarray, encoding: str) -> dict[str, np.ndarray]:
@@ -246,5 +204,4 @@ def pixel_levels(cap, setup, rec, bins_of: Callable) -> dict[str, np.ndarray]:
     out = {k: np.where(ok, v, fill[k]) for k, v in out.items()}
     rho = np.broadcast_to(np.asarray(kern["rho"], np.float64), (3,))
     out["ref"] = np.broadcast_to(rho / np.pi, out["lit_std"].shape).copy()
-    out["response_levels"] = np.ones(())  # a response acts on every level (0 where the texture is carried)
     return out

@@ -83,7 +83,7 @@ def with_texture(data, pred: np.ndarray, rho: np.ndarray | None = None, variogra
     fit.s = fit.s * (fit.scale[:, None] ** np.arange(3))  # TextureFit.sigma takes f / scale
     sigma = np.where(m, fit.sigma(pred, w), 1.0)
     W = texture_whitening(fit, sigma, exact)
-    new = dataclasses.replace(data, sigma=sigma, whiten=W, pixels=_ratio_response(data.pixels))
+    new = dataclasses.replace(data, sigma=sigma, whiten=W)
     summary: dict = {
         "amplitude": [float(v) for v in np.sqrt(tex_var) / np.maximum(mean_level, 1e-30)],
         "rho": [float(fit.acov[c * n, c * n + 1] / max(tex_var[c], 1e-300)) for c in range(c_n)],
@@ -97,14 +97,6 @@ def with_texture(data, pred: np.ndarray, rho: np.ndarray | None = None, variogra
     P[: lv[0].shape[0]] = lv[0]
     summary["levels"] = lv[2]
     return dataclasses.replace(new, levels=(P, lv[1])), summary, CrossTexture(y, off, W, sigma, exact, lv[2]["deff"])
-
-
-def _ratio_response(pixels: dict | None) -> dict | None:
-    """The pixel levels with a camera response acting on the ratio, not on every level
-    (:mod:`~wardjax.effects._pixel_levels`: the dark level holds the texture carried here)."""
-    if pixels is None or "response_levels" not in pixels:
-        return pixels
-    return {**pixels, "response_levels": np.zeros(())}
 
 
 def _no_levels(data) -> tuple[np.ndarray, np.ndarray]:
