@@ -150,14 +150,3 @@ def test_a_refused_second_step_leaves_the_gaps_as_they_were():
     assert row["found"] == "anisotropy", row
     assert row["gap_after"] == row["gap_true"] and float(row["gap_after"]) < 1.1, row
 
-
-@pytest.mark.slow  # a Radiance render and a discovery: a minute on two cores
-def test_a_power_response_is_named_on_every_level_and_rho_s_is_on_the_truth():
-    """The bench's ``response_power`` (seed 2): the sensor's signal raised to 1.12 under a 2 % room ambient in
-    both frames. γ is named; read as a power of the ratio it left ρs 3 % low (z −12 to −15 over the seeds),
-    as a power of every pixel level, lit and dark, ρs and α are on the truth within 3 σ."""
-    from benchmarks.radiance_bench._bench import run_case
-
-    row = run_case("response_power", "satin", "none", 2, (160, 120), 8)
-    assert row["first"] == "gamma", row
-    assert abs(float(row["z_rho_s"])) < 3 and abs(float(row["z_alpha"])) < 3, row
