@@ -149,4 +149,3 @@ def test_a_refused_second_step_leaves_the_gaps_as_they_were():
     row = run_case("null", "desk", "wood", 2, (160, 120), 8)
     assert row["found"] == "anisotropy", row
     assert row["gap_after"] == row["gap_true"] and float(row["gap_after"]) < 1.1, row
-
