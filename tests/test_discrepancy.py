@@ -43,6 +43,9 @@ def test_the_discrepancy_is_read_back_and_covers_the_truth():
             assert abs(v["sigma"] ** 2 / (v["sigma_model"] ** 2 + v["sigma_discrepancy"] ** 2) - 1) < 1e-12
             z_with.append((v["value"] - truth) / v["sigma"])
             z_without.append((v["value"] - truth) / v["sigma_model"])
+    d = rep.to_dict()
+    assert d["discrepancy"]["covariate"] == "theta_h" and d["averaged"]["rho_s"]["sigma_discrepancy"] > 0
+    assert "The parameters' σ include the discrepancy (a level per bin of theta_h" in rep.to_markdown()
     assert np.max(np.abs(z_with)) < 4, z_with
     assert np.max(np.abs(z_without)) > 6, z_without
 
@@ -51,6 +54,7 @@ def test_no_discrepancy_where_the_gap_is_within_the_noise():
     rep = discover(ScanlineModel(), _case(0, 0.0)[0], effects=(), max_steps=0)
     assert rep.discrepancy is None and not rep.unexplained, rep.gap
     assert all(v["sigma_discrepancy"] == 0.0 for v in rep.averaged.values())
+    assert rep.to_dict()["discrepancy"] is None and "include the discrepancy" not in rep.to_markdown()
 
 
 def test_the_whitened_jacobian_is_the_back_whitening_undone():

@@ -471,7 +471,8 @@ class DiscoveryReport:
                 f"\nThe parameters' σ include the discrepancy (a level per bin of {d['covariate']}, "
                 f"{d['bins']} bins, SD τ = {d['tau']:.3g} σ of the noise, from the binned χ² above its bins): "
                 + ", ".join(
-                    f"{k} = {_fmt(v['value'], v['sigma'])} (the discrepancy's share ± {v['sigma_discrepancy']:.2g})"
+                    f"{k} = {_fmt(v['value'], v['sigma'])} (the discrepancy alone ± {v['sigma_discrepancy']:.2g}, "
+                    f"the models' ± {math.sqrt(max(v['sigma'] ** 2 - v['sigma_discrepancy'] ** 2, 0.0)):.2g})"
                     for k, v in av.items()
                 )
                 + ".\n"
