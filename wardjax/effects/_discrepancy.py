@@ -6,9 +6,9 @@ Why
     explains it (an "unexplained discrepancy"), the model is not right, and
     the part of the discrepancy that lies along the parameters' own
     directions is absorbed by them, unseen in the residuals: on the Radiance
-    bench a second lamp left ρs 7 % low at z −150, a smudge at z −250.
+    bench a second lamp left ρs 7 % low at z −150, a smudge 25 % low at z −300.
 
-The discrepancy term (Kennedy & O'Hagan 2001, J. R. Stat. Soc. B 63, 425, eq. 5)
+The discrepancy term (Kennedy & O'Hagan 2001, J. R. Stat. Soc. B 63, 425)
     The data are ``y = f(θ) + δ(x) + ε``. ``δ`` is taken constant over each of
     the quantile bins of the covariate along which the final whitened
     residuals show the most structure (the verdict's binned test, ``B`` bins),
@@ -38,7 +38,8 @@ What it cannot see
     A discrepancy whose every form the parameters absorb leaves no structure:
     room light in the lit frame alone scales the specular part of every ratio
     (``ρs`` 13 % low on the Radiance bench) and leaves a gap of 1.34 that
-    widens σ fivefold, z still −86. One capture cannot identify it.
+    widens σ six- to eightfold, z still −55 to −78. One capture cannot
+    identify it.
 """
 
 from __future__ import annotations

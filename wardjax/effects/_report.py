@@ -309,8 +309,9 @@ class DiscoveryReport:
     @property
     def averaged(self) -> dict[str, dict[str, float]]:
         """The model's ρs and α averaged over the last step's candidate models by their evidence: ``value``,
-        ``sigma`` (with the model choice's spread) and ``sigma_model`` (the chosen model's); see
-        :mod:`wardjax.effects._averaging`."""
+        ``sigma`` (with the model choice's spread and the discrepancy term's σ), ``sigma_model`` (the chosen
+        model's) and ``sigma_discrepancy`` (0 where the gap is within the noise); see
+        :mod:`wardjax.effects._averaging` and :mod:`wardjax.effects._discrepancy`."""
         return model_averaged(self.steps, self.baseline, self.ambiguous, self.discrepancy)
 
     def _under(self) -> str:
