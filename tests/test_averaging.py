@@ -96,3 +96,15 @@ def test_nothing_named_is_the_baseline():
     base = _state(0.05, 1e-4, 0.1, 2e-4)
     got = model_averaged([], base)
     assert got["rho_s"] == {"value": 0.05, "sigma": 1e-4, "sigma_model": 1e-4, "sigma_discrepancy": 0.0}
+
+
+def test_the_named_model_enters_whatever_its_ranked_evidence():
+    """Deflated by its own design effect the named effect's ranked ΔBIC can fall below zero; it is still the model
+    the report names and enters at the step's top weight."""
+    base = _state(0.05, 1e-4, 0.1, 2e-4)
+    named = _state(0.06, 1e-4, 0.09, 1e-4)
+    other = _state(0.055, 1e-4, 0.095, 1e-4)
+    cands = [_cand("gamma", -2.0, named), _cand("coloured_specular", 5.0, other)]
+    got = model_averaged([NS(effect="gamma", evidence=NS(state=named), candidates=cands)], base)
+    m, s = _bma([(1.0, 0.06, 1e-4), (1.0, 0.055, 1e-4), (math.exp(-2.5), 0.05, 1e-4)])
+    assert got["rho_s"]["value"] == pytest.approx(m, rel=1e-12) and got["rho_s"]["sigma"] == pytest.approx(s)

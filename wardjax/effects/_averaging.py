@@ -76,7 +76,10 @@ def _average(out: dict, steps: list, baseline, ambiguous) -> None:
     cands = [
         c
         for c in steps[-1].candidates
-        if c.state is not None and c.physical and c.delta_bic > 0 and math.isfinite(c.delta_bic)
+        if c.state is not None
+        and c.physical
+        and math.isfinite(c.delta_bic)
+        and (c.delta_bic > 0 or c.effect == steps[-1].effect)  # the named model enters whatever its ranked ΔBIC
     ]
     top = max([0.0] + [c.delta_bic for c in cands])
     models = [(0.0, before)] + [(top if c.effect in named else c.delta_bic, c.state) for c in cands]
