@@ -44,11 +44,11 @@ What it cannot see
 
 from __future__ import annotations
 
-import jax.numpy as jnp
+import jax
 import numpy as np
 from scipy.linalg import solve_triangular
 
-from ._gls import _gls_design
+from ._models import _whitened_design
 from ._report import FitState
 from ._standard_sigma import jacobian_at
 from ._step_record import flat as _flat
@@ -87,13 +87,13 @@ def _rho_d_share(search, ok: np.ndarray, bins: np.ndarray, nb: int) -> np.ndarra
     """``Uᵀ P_ρd U`` ``(B, B)``: the projection on ρd's whitened columns (one per scanline and channel,
     :func:`~wardjax.effects._models._whitened_design`) between the bins, scanline by scanline."""
     data, mask = search.data, np.asarray(search.mask)
-    sigma = np.asarray(data.sigma)
     W = getattr(data, "whiten", None)
-    inv = np.where(mask, 1.0 / sigma, 0.0)
     if W is None or is_identity_whitening(np.asarray(W)):
+        inv = np.where(mask, 1.0 / np.asarray(data.sigma), 0.0)
         X = inv[..., None] * np.eye(inv.shape[-1])[None, None]
     else:
-        X = np.asarray(_gls_design(jnp.asarray(W), jnp.asarray(inv)))
+        with jax.enable_x64(True):
+            X = np.asarray(_whitened_design(data), np.float64)
     where = np.full(mask.shape, -1)
     flat_bins = np.full(int(mask.sum()), -1)
     flat_bins[ok] = bins
