@@ -259,6 +259,22 @@ def test_lag_sums_by_fft_equal_the_sums_over_each_overlap():
             assert got[K + k, M + m] == pytest.approx(want, abs=1e-12)
 
 
+def test_fft_convolution_equals_scipy_signal():
+    """The FFT convolution the lag sums and the standard's smoothing kernel use is SciPy's ``fftconvolve`` (mode
+    "full"), computed with ``scipy.fft`` alone: same shape and values for unequal, odd and even shapes."""
+    from scipy.signal import fftconvolve
+
+    from wardjax.effects._texture import convolve_full
+
+    rng = np.random.default_rng(4)
+    for sx, sy in [((7, 11), (7, 11)), ((5, 8), (9, 3)), ((1, 16), (4, 1))]:
+        x, y = rng.standard_normal(sx), rng.standard_normal(sy)
+        want = fftconvolve(x, y, mode="full")
+        got = convolve_full(x, y)
+        assert got.shape == want.shape
+        np.testing.assert_allclose(got, want, rtol=0, atol=1e-12)
+
+
 # --------------------------------------------------------------------------- the capture fit's texture-field estimator
 
 

@@ -75,13 +75,14 @@ def bin_lag_correlation(sigma_px: float, b: int) -> np.ndarray:
     """``R(Δ)`` ``(2L + 1, 2L + 1)``: the smoothed, ``b × b``-binned kernel's autocorrelation at bin lags
     ``Δ = (Δs, Δn)`` (centre: ``Δ = 0``, equal to :func:`smoothing_factor`), out to where it falls below 10⁻⁶ of it."""
     from scipy.ndimage import gaussian_filter, uniform_filter
-    from scipy.signal import fftconvolve
+
+    from ._texture import convolve_full
 
     n = 2 * math.ceil(4 * sigma_px) + 2 * b + 3
     img = np.zeros((n, n))
     img[n // 2, n // 2] = 1.0
     k = uniform_filter(gaussian_filter(img, sigma_px, mode="constant"), size=b, mode="constant")
-    auto = fftconvolve(k, k[::-1, ::-1], mode="full")  # Σ_p k(p) k(p + d) at pixel offsets d; centre at n − 1
+    auto = convolve_full(k, k[::-1, ::-1])  # Σ_p k(p) k(p + d) at pixel offsets d; centre at n − 1
     reach = (n - 1) // b
     idx = n - 1 + b * np.arange(-reach, reach + 1)
     r = auto[np.ix_(idx, idx)]
