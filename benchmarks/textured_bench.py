@@ -178,6 +178,7 @@ def run_case(
     sec = time.perf_counter() - t0
     first = rep.found[0] if rep.found else ""
     tx = rep.settings.get("texture") or {}
+    tx = {} if "refused" in tx else tx
     return {
         "texture": tex,
         "amplitude": amp,

@@ -71,3 +71,36 @@ def test_too_few_values_off_the_highlight_decide_nothing():
     off[:] = False
     off[:4, :10] = True
     assert dark_refutes(data, resid, off, pred, claim) is None
+
+
+def test_a_refused_texture_is_reported_with_the_dark_frames_reading(tmp_path):
+    """An untextured capture whose lit frame alone carries a smooth 3 % field (edited into the image file): the
+    residuals claim a texture of about that amplitude, the dark frame shows none of it, and the report says so —
+    the claimed amplitude and the dark frame's share in report.json's settings, a sentence in report.md — rather
+    than reading as if no texture had been looked for."""
+    import tomllib
+
+    from scipy.ndimage import gaussian_filter
+
+    import wardjax as wj
+    from wardjax._files import decode_image, encode_image, read_image, write_image
+    from wardjax.effects import ScanlineModel, discover
+    from wardjax.effects._capture import capture_data
+
+    p = wj.WardParams(rho_d=(0.5, 0.45, 0.4), rho_s=0.04, alpha_x=0.1, alpha_y=0.1)
+    folder = tmp_path / "cap"
+    wj.simulate_capture(p, folder, seed=0, image_size=(120, 90), texture="none")
+    cfg = tomllib.loads((folder / "capture.toml").read_text())
+    enc, bits = cfg["images"]["encoding"], int(cfg["images"]["bit_depth"])
+    lit = folder / cfg["images"]["lit"]
+    v = decode_image(read_image(lit), enc, bits).astype(np.float64)
+    g = gaussian_filter(np.random.default_rng(0).standard_normal(v.shape[:2]), 3.0)
+    write_image(lit, encode_image(np.clip(v * (1 + 0.03 * g / g.std())[..., None], 0, 1), enc, bits))
+    cap = wj.load_capture(folder)
+    rep = discover(ScanlineModel(cap.config.fit.normalization), capture_data(cap), texture=True, max_steps=0)
+    tex = rep.settings["texture"]
+    assert tex is not None and tex["refused"] == "dark frame"
+    assert all(0.02 < a < 0.045 for a in tex["amplitude"]), tex["amplitude"]
+    shown, se = tex["dark_shown"]
+    assert abs(shown) < 4 * se < 0.5
+    assert "taken for the model's misfit, not texture" in rep.to_markdown()

@@ -107,7 +107,7 @@ def test_textured_capture_offset_named_untouched_not(tmp_path, offset, named):
         write_image(lit, encode_image(np.clip(v, 0.0, 1.0), enc, bits))
     cap = wj.load_capture(folder)
     rep = discover(ScanlineModel(cap.config.fit.normalization), capture_data(cap), keep_plot_data=False, texture=True)
-    assert rep.settings["texture"] is not None
+    assert rep.settings["texture"] is not None and "refused" not in rep.settings["texture"]
     assert rep.found == named
 
 

@@ -308,8 +308,8 @@ def _baseline(model, data, testable, lm_steps: int, chunk: int, texture: bool):
         """The run's search with the texture measured on the residuals about ``pred``, and its summary (white
         noise, in the identity's layout, where the residuals show no significant texture)."""
         got = with_texture(data, pred, rho)
-        if got is None:  # no texture left: white noise, in the identity's layout (the run's compiled program)
-            return _with_holdout(plain), None
+        if got is None or got[0] is None:  # none left (or refuted): white noise, in the identity's layout
+            return _with_holdout(plain), None if got is None else got[1]
         data_tex, tex, cross = got
         search = make(data_tex)
         search.cross = cross
@@ -319,8 +319,8 @@ def _baseline(model, data, testable, lm_steps: int, chunk: int, texture: bool):
     if not carry:
         return _with_holdout(plain), cur, None
     search, tex = textured(cur.pred, cur.rho)
-    if tex is None:  # no texture: white noise in the identity's layout, the program the baseline compiled
-        return search, cur, None
+    if tex is None or "refused" in tex:  # white noise in the identity's layout, the program the baseline compiled
+        return search, cur, tex
     search.remeasure = TextureRemeasure(plain, textured)
     # from the white-noise baseline, where the multi-start found its basin: one start, not all of them again
     return search, search.residual_view(TextureRemeasure.refit(search, cur.state)), tex

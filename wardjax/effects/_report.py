@@ -221,6 +221,25 @@ def _num(x):
     return x
 
 
+def _texture_paragraph(tex: dict) -> str:
+    """What report.md says of the ρd texture the baseline's residuals were read for (``settings["texture"]``)."""
+    amp = ", ".join(f"{100 * a:.1f}" for a in tex.get("amplitude", []))
+    shown = tex.get("dark_shown")
+    if "refused" in tex and shown is not None:
+        return (
+            f"The residuals off the highlight vary like a ρd texture ({amp} % of the diffuse level per channel), "
+            f"but the dark frame, which holds the probe's texture under the room's light, shows "
+            f"{100 * shown[0]:.0f} ± {100 * shown[1]:.0f} % of it: that structure is taken for the model's misfit, "
+            "not texture, and the noise is taken as white."
+        )
+    rho = ", ".join(f"{r:.2f}" for r in tex.get("rho", []))
+    dark = f" The dark frame shows {100 * shown[0]:.0f} ± {100 * shown[1]:.0f} % of it." if shown is not None else ""
+    return (
+        f"The probe's ρd texture is carried in the noise as a Gaussian process: {amp} % of the diffuse level per "
+        f"channel, correlation {rho} between neighbouring samples.{dark}"
+    )
+
+
 def _fmt(v: float, s: float) -> str:
     if s is None or not np.isfinite(s) or s == 0:
         return f"{v:.4g}"
@@ -401,6 +420,8 @@ class DiscoveryReport:
             L.append(f"\n![gap per step]({figures['gap']})\n")
         bp = self.baseline.values.get("model", {})
         bs = self.baseline.sigma.get("model", {})
+        if self.settings.get("texture"):
+            L.append("\n## Noise\n\n" + _texture_paragraph(self.settings["texture"]) + "\n")
         L.append("\n## Baseline\n")
         L.append(", ".join(f"{k} = {_fmt(v, bs.get(k))}" for k, v in bp.items()) + "\n")
         for i, s in enumerate(self.steps, 1):

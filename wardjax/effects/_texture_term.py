@@ -50,7 +50,9 @@ def with_texture(data, pred: np.ndarray, rho: np.ndarray | None = None, variogra
     ``variogram``: the covariance along the scanline from the cross-variogram
     (:func:`~wardjax.effects._texture.lag_covariances`), windowed over a quarter
     scanline: the guard's second opinion (:mod:`~wardjax.effects._recheck`).
-    Returns ``None`` if no texture is found.
+    Returns ``None`` if no texture is found, and ``(None, summary, None)`` where the dark frame refutes the
+    texture the residuals claim (``summary["refused"]``, with the claimed ``amplitude`` and the share of it the
+    dark frame shows, ``dark_shown`` ``[share, SE]``): the run then stays with white noise.
     """
     if getattr(data, "kind", None) not in ("ratio", "brdf") or data.y.shape[1] < 8:
         return None
@@ -73,8 +75,9 @@ def with_texture(data, pred: np.ndarray, rho: np.ndarray | None = None, variogra
     mean_level = np.array([np.mean(pred[..., c][m[..., c]]) for c in range(c_n)])
     # the dark frame holds the probe's texture under the room's light, and none of the lamp's misfit
     dark = dark_refutes(data, e, off, pred, tex_var / np.maximum(mean_level, 1e-30) ** 2)
+    amplitude = [float(v) for v in np.sqrt(tex_var) / np.maximum(mean_level, 1e-30)]
     if dark is not None and dark["refuted"]:
-        return None
+        return None, {"refused": "dark frame", "amplitude": amplitude, "dark_shown": [dark["shown"], dark["se"]]}, None
     # a white-noise floor keeps the whitening well conditioned where the texture term took all the variance
     nu = np.maximum(nu, _NOISE_FLOOR * tex_var)
     # its shape in level and irradiance from lag-1 differences over all values (the highlight's shot noise), the
@@ -85,7 +88,7 @@ def with_texture(data, pred: np.ndarray, rho: np.ndarray | None = None, variogra
     W = texture_whitening(fit, sigma, exact)
     new = dataclasses.replace(data, sigma=sigma, whiten=W)
     summary: dict = {
-        "amplitude": [float(v) for v in np.sqrt(tex_var) / np.maximum(mean_level, 1e-30)],
+        "amplitude": amplitude,
         "rho": [float(fit.acov[c * n, c * n + 1] / max(tex_var[c], 1e-300)) for c in range(c_n)],
     }
     if dark is not None:
