@@ -491,7 +491,13 @@ class DiscoveryReport:
             d, av = self.discrepancy, self.averaged
             L.append(
                 f"\nThe parameters' σ include the discrepancy (a level per bin of {d['covariate']}, "
-                f"{d['bins']} bins, SD τ = {d['tau']:.3g} σ of the noise, from the binned χ² above its bins): "
+                f"{d['bins']} bins, SD τ = {d['tau']:.3g} σ of the noise, from the binned χ² above its bins; "
+                + (
+                    f"correlated between bins over {d['length']:.3g} of their range"
+                    if d.get("length")
+                    else "independent between bins"
+                )
+                + ", the most likely): "
                 + ", ".join(
                     f"{k} = {_fmt(v['value'], v['sigma'])} (the discrepancy alone ± {v['sigma_discrepancy']:.2g}, "
                     f"the models' ± {math.sqrt(max(v['sigma'] ** 2 - v['sigma_discrepancy'] ** 2, 0.0)):.2g})"
