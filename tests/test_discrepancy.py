@@ -38,7 +38,9 @@ def test_the_discrepancy_is_read_back_and_covers_the_truth():
         rep = discover(ScanlineModel(), data, effects=(), max_steps=0)
         d = rep.discrepancy
         assert d is not None and rep.unexplained, (rep.gap, rep.unexplained)
-        assert d["covariate"] == "theta_h" and abs(d["tau"] / np.std(levels) - 1) < 0.15, (d, np.std(levels))
+        read = d["readings"]["theta_h"]
+        assert abs(read["tau"] / np.std(levels) - 1) < 0.15, (read, np.std(levels))
+        assert d["readings"][d["covariate"]]["widen"] == max(v["widen"] for v in d["readings"].values())
         av = rep.averaged
         for k, truth in TRUTH.items():
             v = av[k]
@@ -46,8 +48,10 @@ def test_the_discrepancy_is_read_back_and_covers_the_truth():
             z_with.append((v["value"] - truth) / v["sigma"])
             z_without.append((v["value"] - truth) / v["sigma_model"])
     d = rep.to_dict()
-    assert d["discrepancy"]["covariate"] == "theta_h" and d["averaged"]["rho_s"]["sigma_discrepancy"] > 0
-    assert "The parameters' σ include the discrepancy (a level per bin of theta_h" in rep.to_markdown()
+    assert "theta_h" in d["discrepancy"]["readings"] and d["averaged"]["rho_s"]["sigma_discrepancy"] > 0
+    assert f"The parameters' σ include the discrepancy (a level per bin of {d['discrepancy']['covariate']}" in (
+        rep.to_markdown()
+    )
     assert np.max(np.abs(z_with)) < 4, z_with
     assert np.max(np.abs(z_without)) > 6, z_without
 
@@ -63,7 +67,7 @@ def test_levels_correlated_between_bins_are_read_so_and_covered(monkeypatch):
         for seed in range(8):
             rep = discover(ScanlineModel(), _case(seed, 3.0, 1 / 8)[0], effects=(), max_steps=0)
             assert rep.discrepancy is not None
-            lengths.append(rep.discrepancy["length"])
+            lengths.append(rep.discrepancy["readings"]["theta_h"]["length"])
             out += [(rep.averaged[k]["value"] - t) / rep.averaged[k]["sigma"] for k, t in TRUTH.items()]
         return np.abs(out), lengths
 

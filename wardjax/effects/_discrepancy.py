@@ -125,46 +125,67 @@ def _rho_d_share(search, ok: np.ndarray, bins: np.ndarray, nb: int) -> np.ndarra
 
 
 def discrepancy(search, st: FitState, r: np.ndarray, covs: dict[str, np.ndarray], structure: dict) -> dict | None:
-    """The discrepancy term's reading for the final state ``st`` (fitted under ``search``): ``covariate`` (the
-    most structured, by ``χ² − bins`` in ``structure``, the verdict's tests), ``bins``, ``tau`` (``τ̂``, in units
-    of the noise σ) and ``sigma`` (``{name: σ}`` the term adds to each of the model's own parameters); ``None``
-    where no covariate shows structure beyond its bins or no parameter is free.
+    """The discrepancy term's reading for the final state ``st`` (fitted under ``search``): ``covariate``,
+    ``bins``, ``tau`` (``τ̂``, in units of the noise σ), ``length`` (``ℓ``) and ``sigma`` (``{name: σ}`` the term
+    adds to each of the model's own parameters); ``None`` where no covariate shows structure beyond its bins or
+    no parameter is free.
+
+    The term is read along every covariate whose binned χ² exceeds its bins in ``structure`` (the verdict's
+    tests; ``readings``: each one's ``tau``, ``length``, ``lr`` — ``2 log Λ`` against no term — and ``widen``,
+    ``Σ_p (σ_δ,p / σ_p)²`` over the model's parameters). One capture cannot say along which the discrepancy
+    lies (a lamp's misfit shows against the half-vector, the intensity and the scanline alike), so the one
+    that widens the parameters' σ most is taken.
 
     ``r``, ``covs``: the final whitened residuals and the covariates at the values of ``search.mask``, flat.
     """
-    excess = {k: v["chi2"] - v["dof"] for k, v in structure.items() if k in covs}
-    if not excess or not st.free:
+    names = [k for k, v in structure.items() if k in covs and v["chi2"] > v["dof"]]
+    if not names or not st.free:
         return None
-    name = max(excess, key=lambda k: excess[k])
-    ok = np.isfinite(r) & np.isfinite(covs[name])
-    n = int(ok.sum())
-    if excess[name] <= 0 or n == 0:
+    J = _flat(_whitened_jacobian(search, st), search.mask)
+    got = {k: x for k in names if (x := _reading(search, st, r, J, covs[k], structure[k]["chi2"])) is not None}
+    if not got:
         return None
-    bins, nb = quantile_bins(covs[name][ok])
+    own = search.layout.sigma(st.u, np.asarray(st.cov))["model"]
+    sig = {k: dict(search.layout.sigma(st.u, x[4])["model"]) for k, x in got.items()}
+    widen = {k: float(sum((v / own[p]) ** 2 for p, v in s_.items() if own.get(p, 0) > 0)) for k, s_ in sig.items()}
+    name = max(widen, key=lambda k: widen[k])
+    _, nb, tau2, ell, _ = got[name]
+    return {
+        "covariate": name,
+        "bins": nb,
+        "tau": float(np.sqrt(tau2)),
+        "length": ell,
+        "sigma": sig[name],
+        "readings": {
+            k: {"tau": float(np.sqrt(x[2])), "length": x[3], "lr": x[0], "widen": widen[k]} for k, x in got.items()
+        },
+    }
+
+
+def _reading(search, st: FitState, r: np.ndarray, J: np.ndarray, x: np.ndarray, chi2: float):
+    """The term along one covariate ``x`` (flat, as ``r``) whose binned statistic is ``chi2``: ``(likelihood ratio,
+    bins, τ̂², ℓ, ΔΣ)``, or ``None`` where no value has both."""
+    ok = np.isfinite(r) & np.isfinite(x)
+    if not ok.any():
+        return None
+    bins, nb = quantile_bins(x[ok])
     free = list(st.free)
     cov_b = np.asarray(st.cov)[np.ix_(free, free)]
-    J = _flat(_whitened_jacobian(search, st), search.mask)[ok]
-    uj = np.stack([np.bincount(bins, weights=J[:, j], minlength=nb) for j in range(J.shape[1])], 1)  # UᵀJ (B, K)
+    uj = np.stack([np.bincount(bins, weights=J[ok, j], minlength=nb) for j in range(J.shape[1])], 1)  # UᵀJ (B, K)
     g = uj @ cov_b  # (B, K): H⁻¹ Jᵀ summed over each bin
     upu = uj @ g.T + _rho_d_share(search, ok, bins, nb)
     counts = np.bincount(bins, minlength=nb).astype(float)
     keep = counts > 0
     gram = np.diag(counts) - upu  # G = Uᵀ(1 − P)U
     e0 = keep.sum() - float(np.sum(np.diag(upu)[keep] / counts[keep]))
-    ell = _correlation_length(np.bincount(bins, weights=r[ok], minlength=nb), gram)
+    ell, lr = _correlation_length(np.bincount(bins, weights=r[ok], minlength=nb), gram)
     K = bin_correlation(nb, ell)
     w = gram[keep] / np.sqrt(counts[keep, None])  # D^{−½} G
     size = float(np.sum((w @ K) * w))  # tr(D⁻¹ G K G)
-    tau2 = max(structure[name]["chi2"] - e0, 0.0) / max(size, 1e-300)
+    tau2 = max(chi2 - e0, 0.0) / max(size, 1e-300)
     cov = np.zeros_like(np.asarray(st.cov))
     cov[np.ix_(free, free)] = tau2 * g.T @ K @ g
-    return {
-        "covariate": name,
-        "bins": nb,
-        "tau": float(np.sqrt(tau2)),
-        "length": ell,
-        "sigma": dict(search.layout.sigma(st.u, cov)["model"]),
-    }
+    return lr, nb, tau2, ell, cov
 
 
 def bin_correlation(nb: int, ell: float) -> np.ndarray:
@@ -176,14 +197,16 @@ def bin_correlation(nb: int, ell: float) -> np.ndarray:
     return np.exp(-0.5 * ((x[:, None] - x[None, :]) / ell) ** 2)
 
 
-def _correlation_length(z: np.ndarray, gram: np.ndarray) -> float:
+def _correlation_length(z: np.ndarray, gram: np.ndarray) -> tuple[float, float]:
     """The correlation length of :data:`LENGTHS` under which the binned residual sums ``z = Uᵀr`` ``(B,)`` are most
     likely, τ² profiled out: ``z ~ N(0, G + τ² G K G)`` (``G = Uᵀ(1 − P)U``; the noise's part and the discrepancy's
-    part the fit leaves), both restricted to the range of ``G`` (what the fit absorbs is zero in ``z``)."""
+    part the fit leaves), both restricted to the range of ``G`` (what the fit absorbs is zero in ``z``). Returns
+    ``(ℓ, 2 log Λ)``, ``Λ`` the likelihood ratio of that term against none (``τ = 0``)."""
     lam, V = np.linalg.eigh(gram)
     use = lam > 1e-9 * max(float(lam.max()), 1e-300)
     lam, V = lam[use], V[:, use]
     zt = V.T @ z
+    null = 0.5 * (float(np.sum(zt**2 / lam)) + float(np.sum(np.log(lam))))
     best = (-np.inf, 0.0)
     for ell in LENGTHS:
         M = (lam[:, None] * (V.T @ bin_correlation(len(z), ell) @ V)) * lam[None, :]
@@ -200,4 +223,4 @@ def _correlation_length(z: np.ndarray, gram: np.ndarray) -> float:
         ll = -min(nll(t) for t in fine)
         if ll > best[0] + 1e-9:
             best = (ll, ell)
-    return best[1]
+    return best[1], 2.0 * max(best[0] + null, 0.0)

@@ -497,7 +497,7 @@ class DiscoveryReport:
                     if d.get("length")
                     else "independent between bins"
                 )
-                + ", the most likely): "
+                + f"; of the {len(d.get('readings', {})) or 1} covariates with structure, the one that widens σ most): "
                 + ", ".join(
                     f"{k} = {_fmt(v['value'], v['sigma'])} (the discrepancy alone ± {v['sigma_discrepancy']:.2g}, "
                     f"the models' ± {math.sqrt(max(v['sigma'] ** 2 - v['sigma_discrepancy'] ** 2, 0.0)):.2g})"
