@@ -10,12 +10,13 @@ Why
 
 The discrepancy term (Kennedy & O'Hagan 2001, J. R. Stat. Soc. B 63, 425)
     The data are ``y = f(θ) + δ(x) + ε``. ``δ`` is taken constant over each of
-    the quantile bins of the covariate along which the final whitened
-    residuals show the most structure (the verdict's binned test, ``B`` bins),
-    the levels ``ξ ~ N(0, τ² K)`` with ``K_bb' = exp(−(x_b − x_b')²/2ℓ²)``
-    over the bins' ranks ``x_b = (b + ½)/B`` (``ℓ = 0``: independent levels,
-    ``K = I``): ``δ = U ξ``, ``U`` the values' bin indicators ``(N, B)``. The
-    fit absorbs part of it: the residuals are ``(1 − P)(ε + δ)``, ``P`` the
+    the quantile bins of a covariate along which the final whitened residuals
+    show structure (the verdict's binned test, ``B`` bins; of those covariates
+    the one that widens σ most, :func:`discrepancy`), the levels
+    ``ξ ~ N(0, τ² K)`` with ``K_bb' = exp(−(x_b − x_b')²/2ℓ²)`` over the bins'
+    ranks ``x_b = (b + ½)/B`` (``ℓ = 0``: independent levels, ``K = I``):
+    ``δ = U ξ``, ``U`` the values' bin indicators ``(N, B)``. The fit absorbs
+    part of it: the residuals are ``(1 − P)(ε + δ)``, ``P`` the
     projection on the whitened design (ρd's columns per scanline and the
     parameters' Jacobian ``J``), so the binned statistic
     ``T = Σ_b n_b r̄_b² = rᵀ U D⁻¹ Uᵀ r`` (``D`` the bins' counts) has
@@ -37,8 +38,8 @@ The discrepancy term (Kennedy & O'Hagan 2001, J. R. Stat. Soc. B 63, 425)
     is sized by the prior from the part they do show: with independent levels
     no larger than that part; with correlated ones larger, as a smooth
     discrepancy lies largely along the parameters (levels drawn with
-    ``ℓ = 1/8``: read back so, |z| ≤ 2.3 against up to 8.8 read as
-    independent). The report adds ``ΔΣ``'s σ to the model-averaged σ in
+    ``ℓ = 1/8`` are read so, and z stays within ±4 where, read as
+    independent, it goes beyond ±6). The report adds ``ΔΣ``'s σ to the model-averaged σ in
     quadrature.
 
 What it cannot see
