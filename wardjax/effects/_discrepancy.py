@@ -95,17 +95,21 @@ def unback(W: np.ndarray, cols: np.ndarray) -> np.ndarray:
     return np.swapaxes(out.reshape(s_n, c_n, n, k), 1, 2)
 
 
-def _rho_d_share(search, ok: np.ndarray, bins: np.ndarray, nb: int) -> np.ndarray:
-    """``Uᵀ P_ρd U`` ``(B, B)``: the projection on ρd's whitened columns (one per scanline and channel,
-    :func:`~wardjax.effects._models._whitened_design`) between the bins, scanline by scanline."""
+def _rho_d_design(search) -> np.ndarray:
+    """ρd's whitened columns ``(S, N, C, C)``, one per scanline and channel
+    (:func:`~wardjax.effects._models._whitened_design`; ``1/σ`` per channel under white noise)."""
     data, mask = search.data, np.asarray(search.mask)
     W = getattr(data, "whiten", None)
     if W is None or is_identity_whitening(np.asarray(W)):
         inv = np.where(mask, 1.0 / np.asarray(data.sigma), 0.0)
-        X = inv[..., None] * np.eye(inv.shape[-1])[None, None]
-    else:
-        with jax.enable_x64(True):
-            X = np.asarray(_whitened_design(data), np.float64)
+        return inv[..., None] * np.eye(inv.shape[-1])[None, None]
+    with jax.enable_x64(True):
+        return np.asarray(_whitened_design(data), np.float64)
+
+
+def _rho_d_share(X: np.ndarray, mask: np.ndarray, ok: np.ndarray, bins: np.ndarray, nb: int) -> np.ndarray:
+    """``Uᵀ P_ρd U`` ``(B, B)``: the projection on ρd's whitened columns ``X`` (:func:`_rho_d_design`) between the
+    bins, scanline by scanline; ``ok`` flags which of the values at ``mask`` the ``bins`` index."""
     where = np.full(mask.shape, -1)
     flat_bins = np.full(int(mask.sum()), -1)
     flat_bins[ok] = bins
@@ -143,7 +147,8 @@ def discrepancy(search, st: FitState, r: np.ndarray, covs: dict[str, np.ndarray]
     if not names or not st.free:
         return None
     J = _flat(_whitened_jacobian(search, st), search.mask)
-    got = {k: x for k in names if (x := _reading(search, st, r, J, covs[k], structure[k]["chi2"])) is not None}
+    X = _rho_d_design(search)
+    got = {k: x for k in names if (x := _reading(search, st, r, J, X, covs[k], structure[k]["chi2"])) is not None}
     if not got:
         return None
     own = search.layout.sigma(st.u, np.asarray(st.cov))["model"]
@@ -163,9 +168,10 @@ def discrepancy(search, st: FitState, r: np.ndarray, covs: dict[str, np.ndarray]
     }
 
 
-def _reading(search, st: FitState, r: np.ndarray, J: np.ndarray, x: np.ndarray, chi2: float):
+def _reading(search, st: FitState, r: np.ndarray, J: np.ndarray, X: np.ndarray, x: np.ndarray, chi2: float):
     """The term along one covariate ``x`` (flat, as ``r``) whose binned statistic is ``chi2``: ``(likelihood ratio,
-    bins, τ̂², ℓ, ΔΣ)``, or ``None`` where no value has both."""
+    bins, τ̂², ℓ, ΔΣ)``, or ``None`` where no value has both. ``J``: the whitened Jacobian at the values of
+    ``search.mask``, flat; ``X``: ρd's whitened columns (:func:`_rho_d_design`)."""
     ok = np.isfinite(r) & np.isfinite(x)
     if not ok.any():
         return None
@@ -174,7 +180,7 @@ def _reading(search, st: FitState, r: np.ndarray, J: np.ndarray, x: np.ndarray, 
     cov_b = np.asarray(st.cov)[np.ix_(free, free)]
     uj = np.stack([np.bincount(bins, weights=J[ok, j], minlength=nb) for j in range(J.shape[1])], 1)  # UᵀJ (B, K)
     g = uj @ cov_b  # (B, K): H⁻¹ Jᵀ summed over each bin
-    upu = uj @ g.T + _rho_d_share(search, ok, bins, nb)
+    upu = uj @ g.T + _rho_d_share(X, np.asarray(search.mask), ok, bins, nb)
     counts = np.bincount(bins, minlength=nb).astype(float)
     keep = counts > 0
     gram = np.diag(counts) - upu  # G = Uᵀ(1 − P)U
