@@ -45,9 +45,8 @@ The discrepancy term (Kennedy & O'Hagan 2001, J. R. Stat. Soc. B 63, 425)
 What it cannot see
     A discrepancy whose every form the parameters absorb leaves no structure:
     room light in the lit frame alone scales the specular part of every ratio
-    (``ρs`` 13 % low on the Radiance bench) and leaves a gap of 1.34 that
-    widens σ tenfold or more, z still −42 (seed 1). One capture cannot
-    identify it.
+    (``ρs`` 13 % low on the Radiance bench) and leaves a gap of 1.34 whose
+    term leaves z at −20 to −32. One capture cannot identify it.
 """
 
 from __future__ import annotations
