@@ -283,7 +283,8 @@ def _reread(search: _Search, cur: _View, win: Candidate, by_effect: dict, remain
 
 
 def _baseline(model, data, testable, lm_steps: int, chunk: int, texture: bool):
-    """The run's :class:`_Search`, its fitted baseline's :class:`_View` and the texture summary (or ``None``).
+    """The run's :class:`_Search`, its fitted baseline's :class:`_View` and the texture summary (``None`` where no
+    texture is found; with ``refused`` where the dark frame refutes it, the noise then white).
 
     With the texture to be carried, the baseline that measures it is fitted
     under an identity whitening: the same numbers as white noise and the same

@@ -284,7 +284,8 @@ class DiscoveryReport:
     discrepancy
         Where a gap beyond the noise remains, the discrepancy term that widens
         the parameters' σ (:mod:`~wardjax.effects._discrepancy`): ``covariate``,
-        ``bins``, ``tau``, ``sigma`` per parameter; else ``None``.
+        ``bins``, ``tau``, ``length``, ``sigma`` per parameter and ``readings``
+        (the term along each covariate with structure); else ``None``.
     ambiguous
         ``(named, other, ΔBIC difference)`` where an effect with a different
         signature explained the step almost as well (illumination
