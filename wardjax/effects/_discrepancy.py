@@ -94,38 +94,39 @@ def unback(W: np.ndarray, cols: np.ndarray) -> np.ndarray:
     return np.swapaxes(out.reshape(s_n, c_n, n, k), 1, 2)
 
 
-def _rho_d_design(search) -> np.ndarray:
-    """ρd's whitened columns ``(S, N, C, C)``, one per scanline and channel
-    (:func:`~wardjax.effects._models._whitened_design`; ``1/σ`` per channel under white noise)."""
+def _rho_d_basis(search) -> np.ndarray:
+    """An orthonormal basis of ρd's whitened columns per scanline, ``Q`` ``(S, N C, C)`` with ``Q_s Q_sᵀ`` the
+    projection on them (:func:`~wardjax.effects._models._whitened_design`; ``1/σ`` per channel under white
+    noise): formed once per run, so that each covariate's share (:func:`_rho_d_share`) is sums only."""
     data, mask = search.data, np.asarray(search.mask)
     W = getattr(data, "whiten", None)
     if W is None or is_identity_whitening(np.asarray(W)):
         inv = np.where(mask, 1.0 / np.asarray(data.sigma), 0.0)
-        return inv[..., None] * np.eye(inv.shape[-1])[None, None]
-    with jax.enable_x64(True):
-        return np.asarray(_whitened_design(data), np.float64)
+        X = inv[..., None] * np.eye(inv.shape[-1])[None, None]
+    else:
+        with jax.enable_x64(True):
+            X = np.asarray(_whitened_design(data), np.float64)
+    xs = X.reshape(X.shape[0], -1, X.shape[-1])
+    Q = np.zeros_like(xs)
+    for s in range(xs.shape[0]):
+        lam, V = np.linalg.eigh(xs[s].T @ xs[s])
+        use = lam > 1e-12 * max(float(lam.max()), 1e-300)
+        Q[s, :, : int(use.sum())] = xs[s] @ (V[:, use] / np.sqrt(lam[use]))
+    return Q
 
 
-def _rho_d_share(X: np.ndarray, mask: np.ndarray, ok: np.ndarray, bins: np.ndarray, nb: int) -> np.ndarray:
-    """``Uᵀ P_ρd U`` ``(B, B)``: the projection on ρd's whitened columns ``X`` (:func:`_rho_d_design`) between the
-    bins, scanline by scanline; ``ok`` flags which of the values at ``mask`` the ``bins`` index."""
+def _rho_d_share(Q: np.ndarray, mask: np.ndarray, ok: np.ndarray, bins: np.ndarray, nb: int) -> np.ndarray:
+    """``Uᵀ P_ρd U`` ``(B, B)``: the projection on ρd's whitened columns between the bins, ``Σ_s (U_sᵀQ_s)(U_sᵀQ_s)ᵀ``
+    (``Q`` from :func:`_rho_d_basis`); ``ok`` flags which of the values at ``mask`` the ``bins`` index."""
     where = np.full(mask.shape, -1)
     flat_bins = np.full(int(mask.sum()), -1)
     flat_bins[ok] = bins
     where[mask] = flat_bins
-    out = np.zeros((nb, nb))
-    for s in range(X.shape[0]):
-        xs = X[s].reshape(-1, X.shape[-1])
-        gram = xs.T @ xs
-        use = np.diag(gram) > 0
-        if not use.any():
-            continue
-        b = where[s].reshape(-1)
-        sel = b >= 0
-        ux = np.zeros((nb, int(use.sum())))
-        np.add.at(ux, b[sel], xs[sel][:, use])
-        out += ux @ np.linalg.solve(gram[np.ix_(use, use)], ux.T)
-    return out
+    where = where.reshape(Q.shape[0], -1)
+    s_idx, r_idx = np.nonzero(where >= 0)
+    uq = np.zeros((Q.shape[0], nb, Q.shape[-1]))
+    np.add.at(uq, (s_idx, where[s_idx, r_idx]), Q[s_idx, r_idx])
+    return np.einsum("sbc,sdc->bd", uq, uq)
 
 
 def discrepancy(search, st: FitState, r: np.ndarray, covs: dict[str, np.ndarray], structure: dict) -> dict | None:
@@ -146,8 +147,12 @@ def discrepancy(search, st: FitState, r: np.ndarray, covs: dict[str, np.ndarray]
     if not names or not st.free:
         return None
     J = _flat(_whitened_jacobian(search, st), search.mask)
-    X = _rho_d_design(search)
-    got = {k: x for k in names if (x := _reading(search, st, r, J, X, covs[k], structure[k]["chi2"])) is not None}
+    Q = _rho_d_basis(search)
+    free = list(st.free)
+    cov_b = np.asarray(st.cov)[np.ix_(free, free)]
+    got = {
+        k: x for k in names if (x := _reading(search, st, r, J, Q, cov_b, covs[k], structure[k]["chi2"])) is not None
+    }
     if not got:
         return None
     own = search.layout.sigma(st.u, np.asarray(st.cov))["model"]
@@ -167,19 +172,20 @@ def discrepancy(search, st: FitState, r: np.ndarray, covs: dict[str, np.ndarray]
     }
 
 
-def _reading(search, st: FitState, r: np.ndarray, J: np.ndarray, X: np.ndarray, x: np.ndarray, chi2: float):
+def _reading(
+    search, st: FitState, r: np.ndarray, J: np.ndarray, Q: np.ndarray, cov_b: np.ndarray, x: np.ndarray, chi2: float
+):
     """The term along one covariate ``x`` (flat, as ``r``) whose binned statistic is ``chi2``: ``(likelihood ratio,
     bins, τ̂², ℓ, ΔΣ)``, or ``None`` where no value has both. ``J``: the whitened Jacobian at the values of
-    ``search.mask``, flat; ``X``: ρd's whitened columns (:func:`_rho_d_design`)."""
+    ``search.mask``, flat; ``Q``: ρd's whitened basis (:func:`_rho_d_basis`); ``cov_b``: the free parameters'
+    covariance."""
     ok = np.isfinite(r) & np.isfinite(x)
     if not ok.any():
         return None
     bins, nb = quantile_bins(x[ok])
-    free = list(st.free)
-    cov_b = np.asarray(st.cov)[np.ix_(free, free)]
     uj = np.stack([np.bincount(bins, weights=J[ok, j], minlength=nb) for j in range(J.shape[1])], 1)  # UᵀJ (B, K)
     g = uj @ cov_b  # (B, K): H⁻¹ Jᵀ summed over each bin
-    upu = uj @ g.T + _rho_d_share(X, np.asarray(search.mask), ok, bins, nb)
+    upu = uj @ g.T + _rho_d_share(Q, np.asarray(search.mask), ok, bins, nb)
     counts = np.bincount(bins, minlength=nb).astype(float)
     keep = counts > 0
     gram = np.diag(counts) - upu  # G = Uᵀ(1 − P)U
@@ -190,7 +196,7 @@ def _reading(search, st: FitState, r: np.ndarray, J: np.ndarray, X: np.ndarray, 
     size = float(np.sum((w @ K) * w))  # tr(D⁻¹ G K G)
     tau2 = max(chi2 - e0, 0.0) / max(size, 1e-300)
     cov = np.zeros_like(np.asarray(st.cov))
-    cov[np.ix_(free, free)] = tau2 * g.T @ K @ g
+    cov[np.ix_(st.free, st.free)] = tau2 * g.T @ K @ g
     return lr, nb, tau2, ell, cov
 
 
