@@ -21,7 +21,7 @@ fresnel            in     ``plasfunc``: the Ward lobe × exact dielectric Fresne
 anisotropy         in     ``plastic2``, αx 0.07, αy 0.115 (√ = 0.0897)           anisotropy
 response_power     in     the sensor's linear signal raised to 1.12              gamma
 response_gamma22   in     codes written as v^(1/2.2), declared sRGB              encoding, gamma
-flare              in     veiling glare: 4 % of the frame's mean and of a        ambient
+flare              in     veiling glare: 4 % of the frame's mean and of a        glare, ambient
                           W/6-wide blur of it, added to the lit frame
 blur               out    a Gaussian PSF (σ 1.2 px) on both frames               –
 second_lamp        out    a second sphere at (0, 150, 450), 8 % of the           –
@@ -77,7 +77,7 @@ CASES = {
         Case("anisotropy", "in", ("anisotropy",), aniso=(0.07, 0.115)),
         Case("response_power", "in", ("gamma",), response="power"),
         Case("response_gamma22", "in", ("encoding", "gamma"), response="gamma22"),
-        Case("flare", "in", ("ambient",), flare=0.04),
+        Case("flare", "in", ("glare", "ambient"), flare=0.04),
         Case("blur", "out", blur_px=1.2),
         Case("second_lamp", "out", lamp2=0.08),
         Case("room_light", "out", room=0.15),

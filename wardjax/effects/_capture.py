@@ -174,9 +174,9 @@ def capture_data(cap: Capture, *, max_samples: int = 20_000, band_rows: int = 51
     binned = lambda img: bin_scanlines(rec._replace(f_r=img, f_clip=None), max_samples).f_r[keep]
     levels = pixel_levels(cap, setup, rec, binned)
     dark = (levels.pop("dark_pixel"), levels.pop("dark_room")) if cap.dark is not None else None
-    enc, extra = cap.config.images.encoding, ()
+    enc, extra = cap.config.images.encoding, ("glare",)
     if enc in ("srgb", "gamma2.2"):  # the other encoding's reading of each level
         levels.update(alternative_levels(levels, F, enc))
-        extra = ("encoding_alternative",)
+        extra = ("encoding_alternative", "glare")
     data = dataclasses.replace(data, pixels=levels, dark=dark, available=tuple(sorted(data.available + extra)))
     return data if standard is None else dataclasses.replace(data, standard=standard)

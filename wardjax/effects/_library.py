@@ -163,6 +163,52 @@ class AmbientOffset(_ScanlineEffect):
         return y * k - aw, k
 
 
+class VeilingGlare(_ScanlineEffect):
+    """Veiling glare: light the lens spreads over the frame, added to probe and standard alike.
+
+    Physics: stray light inside the lens adds to every pixel of the lit frame
+    a veil ``c`` and a share ``g`` of the frame itself spread wide, ``B`` (the
+    lit frame blurred by a Gaussian of :data:`~wardjax.effects._pixel_levels.GLARE_WIDTH`
+    of the image width); the dark frame, without the lamp, has almost none. With
+    the levels behind each ratio value (:func:`~wardjax.effects._pixel_levels.pixel_levels`:
+    ``B`` at the probe pixel ``B_p`` and at the standard's mirror pixel ``B_q``,
+    the standard's lit-minus-dark level ``span``), the ratio
+    ``f_std (L_p − D_p)/(L_q − D_q)`` becomes::
+
+        f_meas = (f + f_std (c + g B_p)/span) / (1 + (c + g B_q)/span)
+
+    The veil alone is :class:`AmbientOffset` (a level over the standard's span
+    follows the lamp's inverse irradiance); the blurred share is largest beside
+    the highlight and on the bright standard, where a constant is not: it lowers
+    the lobe against the diffuse floor and widens it. Signature: residuals
+    against ``log f`` (the darks lifted most, relative to their level).
+
+    Only one width is tried: a lens whose glare spreads much wider or narrower
+    is read partly as the veil. The Radiance bench draws glare of this width.
+    """
+
+    name = "glare"
+    title = "veiling glare (a veil and a share of the lit frame spread wide)"
+    side = "measurement"
+    covariate = "log_f"
+    requires = ("glare",)
+    params = (
+        Param("c", 0.0, scale=0.005, doc="veil: a level added to the lit frame everywhere (full scale 1)"),
+        Param("g", 0.0, scale=0.02, sign=1, doc="share of the lit frame, blurred wide, added to it"),
+    )
+
+    def measure(self, v, f, ctx):
+        span = ctx["lit_std"] - ctx["dark_std"]
+        add_p, add_q = v["c"] + v["g"] * ctx["glare_probe"], v["c"] + v["g"] * ctx["glare_std"]
+        return (f + ctx["ref"] * add_p / span) / (1.0 + add_q / span)
+
+    def unmeasure(self, v, y, ctx):
+        span = ctx["lit_std"] - ctx["dark_std"]
+        add_p, add_q = v["c"] + v["g"] * ctx["glare_probe"], v["c"] + v["g"] * ctx["glare_std"]
+        k = 1.0 + add_q / span
+        return y * k - ctx["ref"] * add_p / span, k
+
+
 class GammaMismatch(_ScanlineEffect):
     """Camera response other than assumed (γ mismatch).
 
@@ -578,6 +624,7 @@ class PPBCurvature(_ThresholdEffect):
 LIBRARY: tuple[Effect, ...] = (
     Saturation(),
     AmbientOffset(),
+    VeilingGlare(),
     GammaMismatch(),
     EncodingMismatch(),
     IlluminationGradient(),

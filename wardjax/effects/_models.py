@@ -99,10 +99,11 @@ class ScanlineData(eqx.Module):
         parameters' covariance (:mod:`~wardjax.effects._standard_sigma`).
     pixels
         ``None`` or the pixel levels behind each ratio value (a capture's):
-        ``lit_std``, ``dark_std``, ``dark_probe``, ``ref`` ``(S, N, C)``, and
-        for an sRGB or power-2.2 file the other encoding's reading of them
-        (``lit_probe``, ``alt_*``), read by the encoding effect
-        (:mod:`~wardjax.effects._pixel_levels`).
+        ``lit_std``, ``dark_std``, ``dark_probe``, ``ref`` ``(S, N, C)``, the
+        lit frame blurred wide at the probe and the standard (``glare_probe``,
+        ``glare_std``, read by the veiling glare), and for an sRGB or power-2.2
+        file the other encoding's reading of them (``lit_probe``, ``alt_*``),
+        read by the encoding effect (:mod:`~wardjax.effects._pixel_levels`).
     dark
         ``(D, R)`` or ``None``: the dark frame's level at each value's probe
         pixels ``D`` and the room's light under it ``R`` (the dark frame

@@ -164,8 +164,15 @@ def _dark_level(cap, f: np.ndarray, on: np.ndarray, box) -> np.ndarray:
     return smooth_on(np.asarray(cap.dark[box], np.float64), on, sigma) * texture
 
 
+# the veiling glare's spread (:class:`~wardjax.effects._library.VeilingGlare`): a Gaussian whose SD is the image
+# width over this
+GLARE_WIDTH = 6.0
+
+
 def pixel_levels(cap, setup, rec, bins_of: Callable) -> dict[str, np.ndarray]:
     """The levels of every value of a capture: ``lit_std``, ``dark_std``, ``dark_probe``, ``ref`` ``(S, N, C)``;
+    the lit frame blurred over :data:`GLARE_WIDTH` at the probe pixel and at the standard's mirror pixel,
+    ``glare_probe``, ``glare_std``, for the veiling glare (:class:`~wardjax.effects._library.VeilingGlare`);
     and the dark frame's pixels at the probe, ``dark_pixel``, with the room's light under them, ``dark_room``
     (the dark frame smoothed over ``_ROOM_PX``), for the texture's check (:mod:`~wardjax.effects._dark_texture`).
 
@@ -197,13 +204,19 @@ def pixel_levels(cap, setup, rec, bins_of: Callable) -> dict[str, np.ndarray]:
     dark = _dark_level(cap, np.asarray(rec.f_r[box], np.float64), on, box)[on]
     raw = np.zeros((*on.shape, 3)) if cap.dark is None else np.asarray(cap.dark[box], np.float64)
     room = raw if cap.dark is None else _smooth_on(raw, on, _ROOM_PX)
-    img = np.full((*rec.f_r.shape[:2], 15), np.nan, np.float32)  # the five levels' channels, binned in one pass
-    img[box][on] = np.concatenate([sampled, dark, raw[on], room[on]], axis=-1)
+    from scipy.ndimage import gaussian_filter
+
+    lit = np.asarray(cap.lit, np.float64)
+    wide = gaussian_filter(lit, (lit.shape[1] / GLARE_WIDTH, lit.shape[1] / GLARE_WIDTH, 0), mode="nearest")
+    g_std = cast(np.ndarray, sample_bilinear(wide.astype(np.float32), uv))
+    img = np.full((*rec.f_r.shape[:2], 21), np.nan, np.float32)  # the levels' channels, binned in one pass
+    img[box][on] = np.concatenate([sampled, dark, raw[on], room[on], wide[box][on], g_std], axis=-1)
     both = np.asarray(bins_of(img), np.float64)
     out = {"lit_std": both[..., 0:3], "dark_std": both[..., 3:6], "dark_probe": both[..., 6:9]}
     out |= {"dark_pixel": both[..., 9:12], "dark_room": both[..., 12:15]}
+    out |= {"glare_probe": both[..., 15:18], "glare_std": both[..., 18:21]}
     fill = {"lit_std": float(np.nanmedian(out["lit_std"])), "dark_std": float(np.nanmedian(out["dark_std"]))}
-    fill |= {"dark_probe": 0.0, "dark_pixel": 0.0, "dark_room": 0.0}
+    fill |= {"dark_probe": 0.0, "dark_pixel": 0.0, "dark_room": 0.0, "glare_probe": 0.0, "glare_std": 0.0}
     ok = np.all([np.isfinite(v) for v in out.values()], axis=0)
     out = {k: np.where(ok, v, fill[k]) for k, v in out.items()}
     rho = np.broadcast_to(np.asarray(kern["rho"], np.float64), (3,))
