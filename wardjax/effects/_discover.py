@@ -98,16 +98,22 @@ _AMBIGUOUS_BIC = 6.0  # a confusable runner-up within this ΔBIC of the winner i
 # half-vector azimuth, the Fresnel rise the incidence angle, and across one capture's scanlines they covary (on
 # textured captures the Fresnel rise, one parameter, took the ramp across the image); a camera response compresses
 # the highlight against each channel's diffuse floor, which a per-channel specular scale mimics; a mis-declared
-# encoding lifts the darks, as light from the room in the lit frame does
+# encoding lifts the darks, as light from the room in the lit frame does; veiling glare is that light plus a share
+# of the frame spread wide, which a uniform veil alone approaches
 _CONFUSABLE = {
     "illumination_gradient": ("anisotropy", "fresnel"),
     "anisotropy": ("illumination_gradient",),
     "fresnel": ("illumination_gradient",),
     "gamma": ("coloured_specular",),
     "coloured_specular": ("gamma",),
-    "ambient": ("encoding",),
+    "ambient": ("encoding", "glare"),
     "encoding": ("ambient",),
+    "glare": ("ambient",),
 }
+# where the step's leader loses its evidence under the texture measured on its own residuals (``_reread``), this
+# many runners-up are read there too, in rank order: a leader that nests another (glare nests the veil) may rank
+# first only by taking texture the re-measured covariance then holds
+_REREAD_RUNNERS_UP = 2
 
 
 def _fit_baseline(search: _Search) -> FitState:
@@ -212,13 +218,23 @@ class _Steps:
             cands, by_effect = ranked
             win, ranked_bic = cands[0], cands[0].delta_bic  # ΔBIC on the runners-up's scale (one covariance)
             read = _reread(search, cur, win, by_effect, remaining)  # the covariance where the leader cannot hide
+            if read is not None and not _justified(read[2], len(remaining), alpha):
+                # the leader's evidence was the covariance's: the runners-up read where they cannot hide either;
+                # one that stands there takes the step, the leader entered with its evidence there (neither named
+                # beside it nor averaged over)
+                for c in cands[1 : _REREAD_RUNNERS_UP + 1]:
+                    other = None if not c.delta_bic > 0 else _reread(search, cur, c, by_effect, remaining)
+                    if other is not None and _justified(other[2], len(remaining), alpha):
+                        cands = [c, read[2], *(x for x in cands[1:] if x is not c)]
+                        read, win, ranked_bic = other, c, c.delta_bic
+                        break
             if read is not None:
                 search, cur, win, summary = read
                 # the model averaging reads its fit there, weighed on the runners-up's scale
                 cands = [dataclasses.replace(win, delta_bic=ranked_bic) if c.effect == win.effect else c for c in cands]
             # the smoothed standard's shared noise (wardjax.effects._standard_sigma)
             win = standard_deflated(search, win)
-            if not (win.delta_bic > 0 and win.p_value * len(remaining) < alpha):
+            if not _justified(win, len(remaining), alpha):
                 break
             hold = None if search.holdout is None else search.holdout(cur.state, win.state, win.delta_chi2)
             if hold is not None:
@@ -253,6 +269,11 @@ class _Steps:
         return False
 
 
+def _justified(win: Candidate, tested: int, alpha: float) -> bool:
+    """Whether a step's candidate is worth its parameters and significant among the ``tested`` ones (Bonferroni)."""
+    return win.delta_bic > 0 and win.p_value * tested < alpha
+
+
 def _reread(search: _Search, cur: _View, win: Candidate, by_effect: dict, remaining: list[int]):
     """The step's leader and the model before it under the texture measured on the leader's residuals
     (:mod:`wardjax.effects._remeasure`), its evidence read again there: ``(search, cur, win, texture)``
@@ -267,9 +288,11 @@ def _reread(search: _Search, cur: _View, win: Candidate, by_effect: dict, remain
     new, before, after, summary = got
     new.remeasure = search.remeasure
     e, view = search.testable[i], new.residual_view(before)
-    dchi2 = max(before.chi2 - after.chi2, 0.0) if e.physical(after.values[e.name]) else 0.0
+    physical = e.physical(after.values[e.name])
+    dchi2 = max(before.chi2 - after.chi2, 0.0) if physical else 0.0
     cand = dataclasses.replace(
         win,
+        physical=physical,
         delta_chi2=dchi2,
         delta_bic=dchi2 - win.k * new.ln_n,
         p_value=_lr_p(dchi2, e, win.k),

@@ -207,6 +207,9 @@ _SEPARATE = {
     "response bends every level, the diffuse floor too; a coloured specular scales the lobe alone",
     frozenset({"ambient", "encoding"}): "a second exposure would: light from the room scales with the lamp's "
     "light at any exposure, an encoding bends each level by its code, so its share of the darks moves",
+    frozenset({"ambient", "glare"}): "a black patch in the frame near the highlight would: light from the room "
+    "lifts it as it lifts a black patch far away, the lens's glare lifts it more the nearer it lies to the bright "
+    "highlight and standard",
 }
 
 
