@@ -61,3 +61,24 @@ def test_a_leader_its_own_texture_refutes_gives_the_step_to_the_veil(tmp_path):
     cands = {c.effect: c for c in rep.steps[0].candidates}
     assert rep.steps[0].candidates[1].effect == "glare", [c.effect for c in rep.steps[0].candidates]
     assert not cands["glare"].physical and cands["glare"].delta_bic < 0, cands["glare"]
+
+
+@pytest.mark.parametrize("shape", [(240, 320), (90, 121), (600, 800)])
+def test_the_glare_field_on_its_coarse_grid_is_the_full_frames_blur(shape):
+    """The wide blur taken on block averages and read back bilinearly equals :func:`scipy.ndimage.gaussian_filter`
+    of the full frame (edges repeated) to 0.3 % of the blurred frame's range, on a frame with a bright highlight,
+    a bright patch against the corner and noise."""
+    from wardjax.effects._pixel_levels import glare_at, glare_field
+
+    rng = np.random.default_rng(0)
+    h, w = shape
+    yy, xx = np.mgrid[0:h, 0:w]
+    lit = 0.1 + 0.05 * rng.random((h, w, 3))
+    lit += np.exp(-((xx - 0.6 * w) ** 2 + (yy - 0.4 * h) ** 2) / (2 * (0.03 * w) ** 2))[..., None]
+    lit[int(0.7 * h) :, : int(0.2 * w)] = 0.9
+    sd = w / GLARE_WIDTH
+    full = gaussian_filter(lit, (sd, sd, 0), mode="nearest")
+    field, step = glare_field(lit)
+    got = glare_at(field, step, np.stack([xx, yy], axis=-1).astype(float))
+    assert step == max(1, int(sd // 8))
+    assert np.max(np.abs(got - full)) < 0.003 * np.ptp(full), np.max(np.abs(got - full)) / np.ptp(full)

@@ -167,6 +167,37 @@ def _dark_level(cap, f: np.ndarray, on: np.ndarray, box) -> np.ndarray:
 # the veiling glare's spread (:class:`~wardjax.effects._library.VeilingGlare`): a Gaussian whose SD is the image
 # width over this
 GLARE_WIDTH = 6.0
+_GLARE_COARSE_PX = 8.0  # the glare's blur is taken on a grid this many of its cells to the Gaussian's SD
+
+
+def glare_field(lit: np.ndarray) -> tuple[np.ndarray, int]:
+    """The lit frame ``(H, W, C)`` blurred by a Gaussian of SD ``W/GLARE_WIDTH`` (edges repeated), on a grid
+    ``step`` pixels to a cell: ``(field, step)``, read at pixel coordinates by :func:`glare_at`.
+
+    The frame, its edges repeated over one cell beyond each side, is averaged over ``step × step`` blocks first
+    (``step`` the largest that leaves :data:`_GLARE_COARSE_PX` cells to the SD; 1 below a 96-pixel width): a blur
+    this wide is as smooth as the grid, and on a 4,000-pixel photograph it would otherwise run a 5,000-tap kernel
+    over every pixel. Cell ``(i, j)`` is centred on pixel ``(step (j − ½) − ½, step (i − ½) − ½)``.
+    """
+    from scipy.ndimage import gaussian_filter
+
+    h, w = lit.shape[:2]
+    sd = w / GLARE_WIDTH
+    step = max(1, int(sd // _GLARE_COARSE_PX))
+    pad = [(step, step + (-n) % step) for n in (h, w)] + [(0, 0)] * (lit.ndim - 2)
+    big = np.pad(np.asarray(lit, np.float64), pad, mode="edge")
+    coarse = big.reshape(big.shape[0] // step, step, big.shape[1] // step, step, -1).mean(axis=(1, 3))
+    return gaussian_filter(coarse, (sd / step, sd / step, 0), mode="nearest"), step
+
+
+def glare_at(field: np.ndarray, step: int, uv: np.ndarray) -> np.ndarray:
+    """``field`` (:func:`glare_field`) at full-frame pixel coordinates ``uv`` ``(..., 2)`` (column, row),
+    bilinearly (NaN stays NaN)."""
+    from ..reconstruct import sample_bilinear
+
+    top = np.array([field.shape[1] - 1, field.shape[0] - 1], np.float64)
+    cell = np.clip((np.asarray(uv, np.float64) + 0.5) / step + 0.5, 0.0, top)
+    return cast(np.ndarray, sample_bilinear(field, cell))
 
 
 def pixel_levels(cap, setup, rec, bins_of: Callable) -> dict[str, np.ndarray]:
@@ -204,13 +235,12 @@ def pixel_levels(cap, setup, rec, bins_of: Callable) -> dict[str, np.ndarray]:
     dark = _dark_level(cap, np.asarray(rec.f_r[box], np.float64), on, box)[on]
     raw = np.zeros((*on.shape, 3)) if cap.dark is None else np.asarray(cap.dark[box], np.float64)
     room = raw if cap.dark is None else _smooth_on(raw, on, _ROOM_PX)
-    from scipy.ndimage import gaussian_filter
-
-    lit = np.asarray(cap.lit, np.float64)
-    wide = gaussian_filter(lit, (lit.shape[1] / GLARE_WIDTH, lit.shape[1] / GLARE_WIDTH, 0), mode="nearest")
-    g_std = cast(np.ndarray, sample_bilinear(wide.astype(np.float32), uv))
+    field, step = glare_field(np.asarray(cap.lit))
+    rows, cols = np.nonzero(on)
+    at_probe = np.stack([cols + box[1].start, rows + box[0].start], axis=-1).astype(np.float64)
+    glare = [glare_at(field, step, at_probe), glare_at(field, step, uv)]  # at the probe, at the standard
     img = np.full((*rec.f_r.shape[:2], 21), np.nan, np.float32)  # the levels' channels, binned in one pass
-    img[box][on] = np.concatenate([sampled, dark, raw[on], room[on], wide[box][on], g_std], axis=-1)
+    img[box][on] = np.concatenate([sampled, dark, raw[on], room[on], *glare], axis=-1)
     both = np.asarray(bins_of(img), np.float64)
     out = {"lit_std": both[..., 0:3], "dark_std": both[..., 3:6], "dark_probe": both[..., 6:9]}
     out |= {"dark_pixel": both[..., 9:12], "dark_room": both[..., 12:15]}
