@@ -227,7 +227,7 @@ def pixel_levels(cap, setup, rec, bins_of: Callable) -> dict[str, np.ndarray]:
     std = np.asarray(kern["std"], np.float64)[:h, :w, :6]
     origin = np.asarray(kern["offset"], np.float64)
     sigma = max(float(cap.config.fit.smooth_standard_px), _DARK_SMOOTH_PX)
-    box = _bbox(rec.probe, int(np.ceil(4 * sigma)) + 2)
+    box = cast(tuple[slice, slice], _bbox(rec.probe, int(np.ceil(4 * sigma)) + 2))  # the probe is not empty here
     points = np.asarray(rec.points[box], np.float64)
     on = rec.probe[box] & np.isfinite(points).all(-1)
     uv, _ = project(cap.rig.camera, mirror_point(points[on]))

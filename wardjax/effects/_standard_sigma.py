@@ -91,7 +91,10 @@ def lag_form(a: np.ndarray, c: np.ndarray, R: np.ndarray, columns: np.ndarray, a
     if across_only:
         kept[lag] = 0.0
     fshape = [sfft.next_fast_len(q + 2 * lag, real=True) for q in grid.shape[:2]]
-    spectrum = sfft.rfftn(grid, fshape, axes=(0, 1)) * sfft.rfftn(kept[::-1, ::-1], fshape)[..., None, None]
+    spectrum = (
+        np.asarray(sfft.rfftn(grid, fshape, axes=(0, 1)))
+        * np.asarray(sfft.rfftn(kept[::-1, ::-1], fshape))[..., None, None]
+    )
     b = np.asarray(sfft.irfftn(spectrum, fshape, axes=(0, 1)))[lag : lag + grid.shape[0], lag : lag + n]
     out = grid.reshape(-1, k).T @ b.reshape(-1, k)
     return 0.5 * (out + out.T)
