@@ -67,3 +67,20 @@ def test_gap_after_the_true_effect_returns_to_the_noise_band(tmp_path):
     assert 1.0 - 2.0 * sd <= rep.gap[-1] <= 1.0 + 4.0 * sd
     assert rep.gap[0] > 1.0 + 2.0 * sd  # the baseline, under the same covariance
     assert rep.verdict().startswith("found anisotropy")
+
+
+def test_a_leader_its_own_texture_refutes_gives_the_step_to_the_veil(tmp_path):
+    """A uniform offset edited into a marble-textured capture (the textured bench's case): glare, which nests the
+    veil, ranks first by taking part of the texture; under the texture measured on its own residuals its blurred
+    share turns negative (unphysical). The veil, read there in turn, is named, glare neither named beside it nor
+    averaged over (its evidence there recorded, not positive)."""
+    from benchmarks.edited_captures import diagnose_folder, edit_capture, make_capture
+
+    base, case = tmp_path / "base", tmp_path / "case"
+    make_capture(base, texture="marble", size=(160, 120), seed=0, eta=0.0, texture_amplitude=0.04, bit_depth=8)
+    edit_capture(base, case, "offset", 0.01, rounding="stochastic", seed=[0, 2, 4, 2, 1])
+    rep = diagnose_folder(case, texture=True)
+    assert rep.found == ["ambient"] and not rep.ambiguous, (rep.found, rep.ambiguous)
+    cands = {c.effect: c for c in rep.steps[0].candidates}
+    assert rep.steps[0].candidates[1].effect == "glare", [c.effect for c in rep.steps[0].candidates]
+    assert not cands["glare"].physical and cands["glare"].delta_bic < 0, cands["glare"]
