@@ -177,6 +177,6 @@ def capture_data(cap: Capture, *, max_samples: int = 20_000, band_rows: int = 51
     enc, extra = cap.config.images.encoding, ("glare",)
     if enc in ("srgb", "gamma2.2"):  # the other encoding's reading of each level
         levels.update(alternative_levels(levels, F, enc))
-        extra = ("encoding_alternative", "glare")
+        extra += ("encoding_alternative",)
     data = dataclasses.replace(data, pixels=levels, dark=dark, available=tuple(sorted(data.available + extra)))
     return data if standard is None else dataclasses.replace(data, standard=standard)

@@ -197,16 +197,21 @@ class VeilingGlare(_ScanlineEffect):
         Param("g", 0.0, scale=0.02, sign=1, doc="share of the lit frame, blurred wide, added to it"),
     )
 
-    def measure(self, v, f, ctx):
+    @staticmethod
+    def _added(v, ctx):
+        """What the glare adds to the ratio's numerator, ``f_std (c + g B_p)/span``, and denominator, ``1 + (c + g
+        B_q)/span``."""
         span = ctx["lit_std"] - ctx["dark_std"]
         add_p, add_q = v["c"] + v["g"] * ctx["glare_probe"], v["c"] + v["g"] * ctx["glare_std"]
-        return (f + ctx["ref"] * add_p / span) / (1.0 + add_q / span)
+        return ctx["ref"] * add_p / span, 1.0 + add_q / span
+
+    def measure(self, v, f, ctx):
+        top, k = self._added(v, ctx)
+        return (f + top) / k
 
     def unmeasure(self, v, y, ctx):
-        span = ctx["lit_std"] - ctx["dark_std"]
-        add_p, add_q = v["c"] + v["g"] * ctx["glare_probe"], v["c"] + v["g"] * ctx["glare_std"]
-        k = 1.0 + add_q / span
-        return y * k - ctx["ref"] * add_p / span, k
+        top, k = self._added(v, ctx)
+        return y * k - top, k
 
 
 class GammaMismatch(_ScanlineEffect):

@@ -82,7 +82,7 @@ def lag_form(a: np.ndarray, c: np.ndarray, R: np.ndarray, columns: np.ndarray, a
     lags): ``b`` is one FFT correlation of every channel and parameter with ``R'`` (zero beyond the grid), the
     sum one matrix product — not a pass over the grid per lag (25× faster at 11 × 11 lags).
     """
-    s_n, n, c_n, k = a.shape
+    _, n, c_n, k = a.shape
     lag = R.shape[0] // 2
     grid = np.zeros((int(columns.max()) + 1, n, c_n, k))
     grid[columns] = a * np.sqrt(np.broadcast_to(np.asarray(c, float), a.shape[:3]))[..., None]
