@@ -133,8 +133,10 @@ def test_exported_program_is_read_back_without_tracing_and_gives_the_same_number
 
 def test_back_whitening_of_all_columns_at_once_is_each_transposed_alone(rng):
     """``Wᵀ`` of ``K`` columns in one product, in both layouts (channels together ``(S, C N, C N)``, per channel
-    ``(S, C, N, N)``), against each scanline's transposed matrix times each column with NumPy."""
+    ``(S, C, N, N)``) and on both kinds of array (NumPy's on the host, JAX's in a program), against each
+    scanline's transposed matrix times each column with NumPy."""
     import jax
+    import jax.numpy as jnp
 
     from wardjax.effects._gls import _back_whiten_columns
 
@@ -143,14 +145,18 @@ def test_back_whitening_of_all_columns_at_once_is_each_transposed_alone(rng):
     c_n, n, k = 3, m // 3, 4
     cols = rng.normal(size=(s_n, n, c_n, k))
     per = np.tril(rng.normal(size=(s_n, c_n, n, n))) + 3.0 * np.eye(n)
+    host = _back_whiten_columns(W, cols), _back_whiten_columns(per, cols)
+    assert all(isinstance(x, np.ndarray) for x in host)
     with jax.enable_x64(True):
-        got, got_per = np.asarray(_back_whiten_columns(W, cols)), np.asarray(_back_whiten_columns(per, cols))
-    for s in range(s_n):
-        for j in range(k):
-            want = (W[s].T @ cols[s, :, :, j].T.reshape(-1)).reshape(c_n, n).T  # values ordered channel by channel
-            np.testing.assert_allclose(got[s, :, :, j], want, rtol=1e-12, atol=1e-12)
-            for c in range(c_n):
-                np.testing.assert_allclose(got_per[s, :, c, j], per[s, c].T @ cols[s, :, c, j], rtol=1e-12)
+        dev = _back_whiten_columns(jnp.asarray(W), cols), _back_whiten_columns(jnp.asarray(per), jnp.asarray(cols))
+    assert all(isinstance(x, jax.Array) for x in dev)
+    for got, got_per in (host, (np.asarray(dev[0]), np.asarray(dev[1]))):
+        for s in range(s_n):
+            for j in range(k):
+                want = (W[s].T @ cols[s, :, :, j].T.reshape(-1)).reshape(c_n, n).T  # values ordered channel by channel
+                np.testing.assert_allclose(got[s, :, :, j], want, rtol=1e-12, atol=1e-12)
+                for c in range(c_n):
+                    np.testing.assert_allclose(got_per[s, :, c, j], per[s, c].T @ cols[s, :, c, j], rtol=1e-12)
 
 
 def test_materialised_residuals_linearise_to_their_jacobian_not_to_the_data(rng):

@@ -86,21 +86,3 @@ def test_no_discrepancy_where_the_gap_is_within_the_noise():
     assert rep.to_dict()["discrepancy"] is None and "include the discrepancy" not in rep.to_markdown()
 
 
-def test_the_whitened_jacobian_is_the_back_whitening_undone():
-    """Under a texture's whitening the term needs ``∂r/∂u`` itself; the program gives ``Wᵀ ∂r/∂u``. ``unback``
-    undoes :func:`_back_whiten_columns` in both of its layouts, to rounding."""
-    import jax
-    import jax.numpy as jnp
-
-    from wardjax.effects._discrepancy import unback
-    from wardjax.effects._gls import _back_whiten_columns
-
-    rng = np.random.default_rng(2)
-    s_n, n, c_n, k = 3, 7, 3, 2
-    cols = rng.standard_normal((s_n, n, c_n, k))
-    joint = np.tril(rng.standard_normal((s_n, c_n * n, c_n * n))) + 4 * np.eye(c_n * n)
-    per = np.tril(rng.standard_normal((s_n, c_n, n, n))) + 4 * np.eye(n)
-    with jax.enable_x64(True):
-        for W in (joint, per):
-            back = np.asarray(_back_whiten_columns(jnp.asarray(W), jnp.asarray(cols)))
-            np.testing.assert_allclose(unback(W, back), cols, rtol=1e-10, atol=1e-12)

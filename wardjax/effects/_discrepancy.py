@@ -53,45 +53,19 @@ from __future__ import annotations
 
 import jax
 import numpy as np
-from scipy.linalg import solve_triangular
 
 from ._models import _whitened_design
 from ._report import FitState
-from ._standard_sigma import jacobian_at
+from ._standard_sigma import whitened_jacobian
 from ._step_record import flat as _flat
 from ._structure import quantile_bins
 from ._texture_term import is_identity_whitening
 
-__all__ = ["LENGTHS", "bin_correlation", "discrepancy", "unback"]
+__all__ = ["LENGTHS", "bin_correlation", "discrepancy"]
 
 # The prior's correlation lengths between the bins' levels, in shares of the covariate's range of ranks (0: the
 # levels independent); the most likely one is taken (:func:`_correlation_length`).
 LENGTHS = (0.0, 1 / 16, 1 / 8, 1 / 4, 1 / 2)
-
-
-def _whitened_jacobian(search, st: FitState) -> np.ndarray:
-    """``∂r/∂u`` ``(S, N, C, K)`` of the whitened residuals: :func:`~wardjax.effects._standard_sigma.jacobian_at`
-    gives it back-whitened (``Wᵀ ∂r/∂u``), undone by :func:`unback` (nothing to undo under white noise)."""
-    J = jacobian_at(search, st.u, st.free, st.active)
-    W = getattr(search.data, "whiten", None)
-    return J if W is None or is_identity_whitening(np.asarray(W)) else unback(np.asarray(W), J)
-
-
-def unback(W: np.ndarray, cols: np.ndarray) -> np.ndarray:
-    """``W⁻ᵀ`` of each of ``K`` columns ``(S, N, C, K)``, ``W`` lower-triangular ``(S, C N, C N)`` (the channels of a
-    scanline together, values ordered channel by channel) or ``(S, C, N, N)``: the inverse of
-    :func:`~wardjax.effects._gls._back_whiten_columns`, one triangular solve per scanline (and channel)."""
-    s_n, n, c_n, k = cols.shape
-    if W.ndim == 4:
-        return np.stack(
-            [
-                np.stack([solve_triangular(W[s, c], cols[s, :, c], trans=1, lower=True) for c in range(c_n)], 1)
-                for s in range(s_n)
-            ]
-        )
-    flat = np.swapaxes(cols, 1, 2).reshape(s_n, c_n * n, k)
-    out = np.stack([solve_triangular(W[s], flat[s], trans=1, lower=True) for s in range(s_n)])
-    return np.swapaxes(out.reshape(s_n, c_n, n, k), 1, 2)
 
 
 def _rho_d_basis(search) -> np.ndarray:
@@ -146,7 +120,7 @@ def discrepancy(search, st: FitState, r: np.ndarray, covs: dict[str, np.ndarray]
     names = [k for k, v in structure.items() if k in covs and v["chi2"] > v["dof"]]
     if not names or not st.free:
         return None
-    J = _flat(_whitened_jacobian(search, st), search.mask)
+    J = _flat(whitened_jacobian(search, st.u, st.free, st.active), search.mask)
     Q = _rho_d_basis(search)
     free = list(st.free)
     cov_b = np.asarray(st.cov)[np.ix_(free, free)]

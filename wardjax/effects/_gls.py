@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 _TINY = 1e-30
 
@@ -43,12 +44,14 @@ def _whiten_columns(W, cols):
 
 def _back_whiten_columns(W, cols):
     """``Wᵀ`` of each of ``K`` vectors at once (whitened residuals back in units of ``1/σ``): ``cols``
-    ``(S, N, C, K)``; ``W`` ``(S, C N, C N)`` (channels together, one product for all ``K``) or ``(S, C, N, N)``."""
-    if W.ndim == 4:
-        return jnp.einsum("scji,sjck->sick", W, cols)
+    ``(S, N, C, K)``; ``W`` ``(S, C N, C N)`` (channels together, one product for all ``K``) or ``(S, C, N, N)``.
+    NumPy arrays in, NumPy out (batched matrix products on the host, no program compiled); otherwise JAX's."""
+    xp = np if isinstance(W, np.ndarray) and isinstance(cols, np.ndarray) else jnp
     s_n, n, c_n, k = cols.shape
-    flat = jnp.swapaxes(cols, 1, 2).reshape(s_n, c_n * n, k)  # values ordered channel by channel, as W's
-    return jnp.swapaxes(jnp.einsum("sji,sjk->sik", W, flat).reshape(s_n, c_n, n, k), 1, 2)
+    if W.ndim == 4:  # per channel: (S, C, N, N)ᵀ @ (S, C, N, K)
+        return xp.moveaxis(xp.matmul(xp.swapaxes(W, -1, -2), xp.moveaxis(cols, 2, 1)), 1, 2)
+    flat = xp.swapaxes(cols, 1, 2).reshape(s_n, c_n * n, k)  # values ordered channel by channel, as W's
+    return xp.swapaxes(xp.matmul(xp.swapaxes(W, -1, -2), flat).reshape(s_n, c_n, n, k), 1, 2)
 
 
 def _gls_design(W, inv_sp):

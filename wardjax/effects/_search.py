@@ -25,7 +25,6 @@ from ._recheck import VariogramRecheck
 from ._remeasure import TextureRemeasure
 from ._report import FitState
 from ._solve import _cov_full, _fit_batch, _Layout, _residual_view, static_key
-from ._standard_sigma import jacobian_at, needs_jacobian
 from ._texture_term import CrossTexture
 
 _SOLO_MIN_OBS = 20_000  # from this many residuals on, each fit is solved alone (_fit_batch)
@@ -149,17 +148,12 @@ class _Search:
         before its first structure test). The thread evaluates the view at
         the initial values and drops the result; :meth:`residual_view` waits
         for it, so the program is compiled once. An error there is left to
-        the first real call to raise. Where the fits' σ take the standard's lags, the program of their Jacobian
-        (:func:`~wardjax.effects._standard_sigma.jacobian_at`, first needed after the first step's fits) is
-        compiled after it in the same thread, while the baseline's fits compile theirs.
+        the first real call to raise.
         """
 
         def compile_it():
             with contextlib.suppress(Exception):  # the first real call raises it
-                u0 = self.layout.u_initial()
-                self._view_arrays(u0, ())
-                if needs_jacobian(self):
-                    jacobian_at(self, u0, self.layout.slices["model"], ())
+                self._view_arrays(self.layout.u_initial(), ())
 
         self._warming = threading.Thread(target=compile_it, name="wardjax-warm-view", daemon=True)
         self._warming.start()

@@ -20,7 +20,6 @@ import optimistix as optx
 
 from . import _exported
 from ._effect import Effect, Param
-from ._gls import _back_whiten_columns
 
 _LINEAR_SOLVER = lx.QR()
 # Levenberg–Marquardt's stopping rule (relative, absolute) on every parameter and every residual; passed to the
@@ -171,27 +170,6 @@ def _residual_view(u, active, data, *, model, effects, layout_key):
         r = model.residuals(vals, act, effects, data)
     # r: the values', then the scanline levels'
     return r[: pred.size], pred, rho, jnp.sum(r[pred.size :] ** 2)
-
-
-@functools.partial(jax.jit, static_argnames=("model", "effects", "layout_key"))
-def _residual_jacobian(u, idx, kmask, active, data, *, model, effects, layout_key):
-    """``Wᵀ ∂r/∂u`` ``(S, N, C, K)`` of the values' whitened residuals ``r`` (ρd profiled) against ``u[idx]``, back in
-    units of ``1/σ`` (``Wᵀ``: the texture's whitening transposed; none where the data are not whitened).
-
-    Forward-mode autodiff (:func:`jax.jacfwd`) over the ``K`` slots of ``idx``, as the
-    Levenberg–Marquardt program takes its Jacobian: slots with ``kmask`` false are zero columns, so one
-    compiled program serves every set of free parameters padded to one width.
-    """
-    ctx = model.context(data) if hasattr(model, "context") else None
-    args = (u, idx, kmask, active, data, ctx)
-    shape = jnp.shape(data.y)
-
-    def resid(z):
-        return _data_residuals(z, args, model=model, effects=effects, layout_key=layout_key)[: math.prod(shape)]
-
-    J = jnp.where(kmask, jax.jacfwd(resid)(u[idx]), 0.0).reshape(*shape, idx.shape[0])
-    W = getattr(data, "whiten", None)
-    return J if W is None else _back_whiten_columns(W, J)
 
 
 def _job_rows(jobs, layout, n_e, width):
