@@ -73,7 +73,7 @@ from ._recheck import VariogramRecheck
 from ._remeasure import TextureRemeasure
 from ._report import Candidate, DiscoveryReport, FitState, Step
 from ._search import _Search, _View
-from ._standard_sigma import standard_deflated, widened_report
+from ._standard_sigma import standard_deflated, widened_report, with_standard
 from ._step_record import flat as _flat
 from ._step_record import make_step, plot_sampler
 from ._structure import _binned_test
@@ -216,6 +216,7 @@ class _Steps:
             if ranked is None:
                 break
             cands, by_effect = ranked
+            search0, cur0 = search, cur  # the step's covariance before any re-measurement
             win, ranked_bic = cands[0], cands[0].delta_bic  # ΔBIC on the runners-up's scale (one covariance)
             read = _reread(search, cur, win, by_effect, remaining)  # the covariance where the leader cannot hide
             if read is not None and not _justified(read[2], len(remaining), alpha):
@@ -233,9 +234,24 @@ class _Steps:
                 # the model averaging reads its fit there, weighed on the runners-up's scale
                 cands = [dataclasses.replace(win, delta_bic=ranked_bic) if c.effect == win.effect else c for c in cands]
             # the smoothed standard's shared noise (wardjax.effects._standard_sigma)
+            d_texture = win.design_effect
             win = standard_deflated(search, win)
             if not _justified(win, len(remaining), alpha):
                 break
+            # a leader that nests a runner-up (glare nests the veil) must pay for its extra parameters on their own
+            extra = _extra_bic(search, win, d_texture)
+            inner = None if extra is None or extra > 0 else _nested_runner_up(search, win, cands)
+            if inner is not None:
+                other = _reread(search0, cur0, inner, by_effect, remaining)
+                in_search, in_read = (search0, inner) if other is None else (other[0], other[2])
+                in_win = standard_deflated(in_search, in_read)
+                if _justified(in_win, len(remaining), alpha):
+                    # the reduced form takes the step; the leader's evidence is its own and its extra parameters'
+                    fallen = dataclasses.replace(win, delta_bic=inner.delta_bic + extra)
+                    rest = (c for c in cands if c.effect not in (inner.effect, win.effect))
+                    cands = [dataclasses.replace(in_read, delta_bic=inner.delta_bic), fallen, *rest]
+                    read, win, ranked_bic = other, in_win, inner.delta_bic
+                    search, cur = (search0, cur0) if other is None else other[:2]
             hold = None if search.holdout is None else search.holdout(cur.state, win.state, win.delta_chi2)
             if hold is not None:
                 win = dataclasses.replace(win, holdout=hold)
@@ -254,11 +270,11 @@ class _Steps:
                 self.states[-1] = cur.state
                 self.textures.append(read[3])
             self.ambiguous += [
-                (win.effect, c.effect, ranked_bic - c.delta_bic)
+                (win.effect, c.effect, margin)
                 for c in cands[1:]
                 if c.effect in _CONFUSABLE.get(win.effect, ())
                 and c.delta_bic > 0
-                and ranked_bic - c.delta_bic < _AMBIGUOUS_BIC
+                and (margin := _margin(search, win, c, ranked_bic, extra)) < _AMBIGUOUS_BIC
             ]
             i_win = next(i for i in remaining if testable[i].name == win.effect)
             new = search.residual_view(win.state if read is not None else by_effect[i_win])
@@ -267,6 +283,54 @@ class _Steps:
             self.cur, self.cur_search = new, search
             self.states.append(new.state)
         return False
+
+
+def _nests(search: _Search, name: str) -> str | None:
+    """The effect ``name``'s reduced form (:attr:`~wardjax.effects._effect.Effect.nests`), or ``None``."""
+    nests = next(t for t in search.testable if t.name == name).nests
+    return None if nests is None else nests[0]
+
+
+def _extra_bic(search: _Search, win: Candidate, d_texture: float) -> float | None:
+    """ΔBIC of ``win``'s extra parameters over the effect it nests (:attr:`~wardjax.effects._effect.Effect.nests`),
+    on their own: their Wald χ² from their absent values under the covariance the effect's evidence is read on
+    (the smoothed standard's lags in it, :func:`~wardjax.effects._standard_sigma.with_standard`, and divided by the
+    texture's design effect between scanlines ``d_texture``), less ``ln n`` per parameter. ``None`` where ``win``
+    nests no effect, has no fit, or holds its extra parameters."""
+    e = next(t for t in search.testable if t.name == win.effect)
+    if e.nests is None or win.state is None:
+        return None
+    st = with_standard(search, win.state)
+    own = {p.name: (j, p) for j, p in zip(search.layout.slices[e.name], e.params)}
+    extra = [own[n] for n in e.nests[1] if own[n][0] in st.free]
+    if not extra:
+        return None
+    idx = [j for j, _ in extra]
+    d = np.array([st.u[j] - p.to_u(p.absent) for j, p in extra])
+    try:
+        chi2 = float(d @ np.linalg.solve(np.asarray(st.cov)[np.ix_(idx, idx)], d)) / max(d_texture, 1.0)
+    except np.linalg.LinAlgError:
+        return None
+    return chi2 - len(idx) * search.ln_n
+
+
+def _nested_runner_up(search: _Search, win: Candidate, cands: list[Candidate]) -> Candidate | None:
+    """The runner-up of the effect ``win`` nests, where it has a fit, is physical and is worth its parameters."""
+    inner = _nests(search, win.effect)
+    return next(
+        (c for c in cands[1:] if c.effect == inner and c.state is not None and c.physical and c.delta_bic > 0), None
+    )
+
+
+def _margin(search: _Search, win: Candidate, c: Candidate, ranked_bic: float, extra: float | None) -> float:
+    """How far ``win`` leads the runner-up ``c`` for the "not told apart" rule: their ΔBICs' difference; for a nested
+    pair the extra parameters' own ΔBIC (``extra``, :func:`_extra_bic`), and never where ``c`` nests ``win`` (the
+    extra parameters did not pay: the reduced form stands alone)."""
+    if _nests(search, c.effect) == win.effect:
+        return np.inf
+    if extra is not None and _nests(search, win.effect) == c.effect:
+        return extra
+    return ranked_bic - c.delta_bic
 
 
 def _justified(win: Candidate, tested: int, alpha: float) -> bool:

@@ -112,6 +112,10 @@ class Effect:
         Covariates (or data properties) without which it cannot be tested.
     cancels_by_symmetry
         ``True`` when it divides out of ``v / v_std`` for reconstructed data.
+    nests
+        ``(name, params)``: with ``params`` at their absent values it is the effect ``name`` (veiling glare with no
+        share of the frame is a veil: the ambient offset). Discovery then names it over that effect only where
+        ``params`` pay for themselves on their own; ``None`` (the default) for an effect that nests none.
     physics
         The forward change in words and maths, with the source.
     """
@@ -125,6 +129,7 @@ class Effect:
     covariate: str = ""
     requires: tuple[str, ...] = ()
     cancels_by_symmetry: bool = False
+    nests: tuple[str, tuple[str, ...]] | None = None
     physics: str = ""
 
     # -------------------------------------------------------------- bookkeeping

@@ -189,6 +189,7 @@ class VeilingGlare(_ScanlineEffect):
 
     name = "glare"
     title = "veiling glare (a veil and a share of the lit frame spread wide)"
+    nests = ("ambient", ("g",))
     side = "measurement"
     covariate = "log_f"
     requires = ("glare",)
