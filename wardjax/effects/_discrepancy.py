@@ -81,12 +81,9 @@ def _rho_d_basis(search) -> np.ndarray:
         with jax.enable_x64(True):
             X = np.asarray(_whitened_design(data), np.float64)
     xs = X.reshape(X.shape[0], -1, X.shape[-1])
-    Q = np.zeros_like(xs)
-    for s in range(xs.shape[0]):
-        lam, V = np.linalg.eigh(xs[s].T @ xs[s])
-        use = lam > 1e-12 * max(float(lam.max()), 1e-300)
-        Q[s, :, : int(use.sum())] = xs[s] @ (V[:, use] / np.sqrt(lam[use]))
-    return Q
+    lam, V = np.linalg.eigh(np.swapaxes(xs, 1, 2) @ xs)  # every scanline's C × C at once
+    use = lam > 1e-12 * np.maximum(lam.max(-1, keepdims=True), 1e-300)  # a channel with no value: a zero column
+    return xs @ (V * np.where(use, 1.0 / np.sqrt(np.where(use, lam, 1.0)), 0.0)[:, None, :])
 
 
 def _rho_d_share(Q: np.ndarray, mask: np.ndarray, ok: np.ndarray, bins: np.ndarray, nb: int) -> np.ndarray:
