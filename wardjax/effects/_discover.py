@@ -296,7 +296,7 @@ def _extra_bic(search: _Search, win: Candidate, d_texture: float) -> float | Non
     on their own: their Wald χ² from their absent values under the covariance the effect's evidence is read on
     (the smoothed standard's lags in it, :func:`~wardjax.effects._standard_sigma.with_standard`, and divided by the
     texture's design effect between scanlines ``d_texture``), less ``ln n`` per parameter. ``None`` where ``win``
-    nests no effect, has no fit, or holds its extra parameters."""
+    nests no effect, has no fit or no finite covariance, or holds its extra parameters."""
     e = next(t for t in search.testable if t.name == win.effect)
     if e.nests is None or win.state is None:
         return None
@@ -311,7 +311,7 @@ def _extra_bic(search: _Search, win: Candidate, d_texture: float) -> float | Non
         chi2 = float(d @ np.linalg.solve(np.asarray(st.cov)[np.ix_(idx, idx)], d)) / max(d_texture, 1.0)
     except np.linalg.LinAlgError:
         return None
-    return chi2 - len(idx) * search.ln_n
+    return chi2 - len(idx) * search.ln_n if np.isfinite(chi2) else None
 
 
 def _nested_runner_up(search: _Search, win: Candidate, cands: list[Candidate]) -> Candidate | None:
