@@ -167,11 +167,22 @@ class _Search:
             args = (jnp.asarray(u), jnp.asarray(act), self.data_dev)
             return _exported.call("residual_view", fn, static_key(static), args)
 
-    def residual_view(self, st: FitState) -> _View:
-        """Whitened residuals, prediction and covariates of ``st``: what the structure tests and plots read."""
+    def _warmed(self) -> None:
+        """Wait for :meth:`warm_view`'s thread, so that the view's program is compiled once."""
         if self._warming is not None:
             self._warming.join()
             self._warming = None
+
+    def residuals_at(self, u, active):
+        """The whitened values' residuals ``(M,)`` at parameters ``u`` with the effects ``active`` switched on: a
+        device array, dispatched and not waited for (what
+        :func:`~wardjax.effects._standard_sigma.whitened_jacobian` differences)."""
+        self._warmed()
+        return self._view_arrays(u, active)[0]
+
+    def residual_view(self, st: FitState) -> _View:
+        """Whitened residuals, prediction and covariates of ``st``: what the structure tests and plots read."""
+        self._warmed()
         r, pred, rho, lv = self._view_arrays(st.u, st.active)
         r, pred = np.asarray(r), np.asarray(pred)
         rho = None if rho is None else np.asarray(rho)

@@ -62,7 +62,7 @@ def whitened_jacobian(search, u: np.ndarray, free, active) -> np.ndarray:
     """``∂r/∂u`` ``(S, N, C, K)`` of the whitened values' residuals ``r`` (ρd profiled) at ``u`` against its ``K``
     parameters ``free`` (the effects ``active`` switched on), in units of ``1/σ``.
 
-    Forward differences through the residual view's program (``search._view_arrays``), step
+    Forward differences through the residual view's program (``search.residuals_at``), step
     ``h_j = 10⁻⁶ max(1, |u_j|)``: within 10⁻⁶ of the Jacobian's largest entry of forward-mode autodiff (the tests
     compare the two; a weak column's own error ~10⁻⁵ of its scale, as central differences', set by the residuals'
     rounding), far below what a σ is known to. The ``K + 1`` evaluations (``K`` is 2–5 in a discovery run) are
@@ -73,11 +73,11 @@ def whitened_jacobian(search, u: np.ndarray, free, active) -> np.ndarray:
     u = np.asarray(u, np.float64)
     shape = np.shape(search.data.y)
     steps = [_STEP * max(1.0, abs(float(u[j]))) for j in free]
-    calls = [search._view_arrays(u, active)[0]]
+    calls = [search.residuals_at(u, active)]
     for j, h in zip(free, steps):
         v = u.copy()
         v[j] += h
-        calls.append(search._view_arrays(v, active)[0])
+        calls.append(search.residuals_at(v, active))
     r0, *r = (np.asarray(x, np.float64).reshape(shape) for x in calls)
     return np.stack([(rj - r0) / h for rj, h in zip(r, steps)], -1) if r else np.zeros((*shape, 0))
 
