@@ -84,5 +84,3 @@ def test_no_discrepancy_where_the_gap_is_within_the_noise():
     assert rep.discrepancy is None and not rep.unexplained, rep.gap
     assert all(v["sigma_discrepancy"] == 0.0 for v in rep.averaged.values())
     assert rep.to_dict()["discrepancy"] is None and "include the discrepancy" not in rep.to_markdown()
-
-
