@@ -240,8 +240,8 @@ class _Steps:
                 break
             # a leader that nests a runner-up (glare nests the veil) must pay for its extra parameters on their own
             extra = _extra_bic(search, win, d_texture)
-            inner = None if extra is None or extra > 0 else _nested_runner_up(search, win, cands)
-            if inner is not None:
+            inner = _nested_runner_up(search, win, cands) if extra is not None and extra <= 0 else None
+            if inner is not None and extra is not None:
                 other = _reread(search0, cur0, inner, by_effect, remaining)
                 in_search, in_read = (search0, inner) if other is None else (other[0], other[2])
                 in_win = standard_deflated(in_search, in_read)

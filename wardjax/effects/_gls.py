@@ -13,6 +13,8 @@ profile's derivative is written by hand (:func:`_gls_rho_joint`).
 
 from __future__ import annotations
 
+from typing import Any
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -46,7 +48,7 @@ def _back_whiten_columns(W, cols):
     """``Wᵀ`` of each of ``K`` vectors at once (whitened residuals back in units of ``1/σ``): ``cols``
     ``(S, N, C, K)``; ``W`` ``(S, C N, C N)`` (channels together, one product for all ``K``) or ``(S, C, N, N)``.
     NumPy arrays in, NumPy out (batched matrix products on the host, no program compiled); otherwise JAX's."""
-    xp = np if isinstance(W, np.ndarray) and isinstance(cols, np.ndarray) else jnp
+    xp: Any = np if isinstance(W, np.ndarray) and isinstance(cols, np.ndarray) else jnp
     s_n, n, c_n, k = cols.shape
     if W.ndim == 4:  # per channel: (S, C, N, N)ᵀ @ (S, C, N, K)
         return xp.moveaxis(xp.matmul(xp.swapaxes(W, -1, -2), xp.moveaxis(cols, 2, 1)), 1, 2)
