@@ -396,11 +396,11 @@ def _baseline(model, data, testable, lm_steps: int, chunk: int, texture: bool):
         """The run's search with the texture measured on the residuals about ``pred``, and its summary (white
         noise, in the identity's layout, where the residuals show no significant texture)."""
         got = with_texture(data, pred, rho)
-        if got is None or got[0] is None:  # none left (or refuted): white noise, in the identity's layout
-            return _with_holdout(plain), None if got is None else got[1]
-        data_tex, tex, cross = got
-        search = make(data_tex)
-        search.cross = cross
+        if got is None or got.refused:  # none left (or refuted): white noise, in the identity's layout
+            return _with_holdout(plain), None if got is None else got.summary
+        tex = got.summary
+        search = make(got.data)
+        search.cross = got.cross
         search.recheck = VariogramRecheck(make, data, pred, rho)
         return _with_holdout(search, tex.get("levels")), tex
 

@@ -55,7 +55,7 @@ class VariogramRecheck:
     def _search(self):
         """The run's search over the data whitened by the variogram's covariance; ``None`` if it finds no texture."""
         textured = with_texture(*self._inputs, variogram=True)
-        return None if textured is None or textured[0] is None else self._make(textured[0])
+        return None if textured is None or textured.refused else self._make(textured.data)
 
     def _refit(self, search, st: FitState) -> FitState:
         r = search.fit([(st.u, list(st.free), st.active)])[0]

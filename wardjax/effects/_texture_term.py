@@ -27,20 +27,43 @@ from ._texture import (
     texture_whitening,
 )
 
-__all__ = ["CrossTexture", "identity_whitened", "is_identity_whitening", "white_noise_share", "with_texture"]
+__all__ = [
+    "CrossTexture",
+    "TextureReading",
+    "identity_whitened",
+    "is_identity_whitening",
+    "white_noise_share",
+    "with_texture",
+]
 
 _NOISE_FLOOR = 0.02  # white noise off the highlight at least this fraction of the texture variance
 # the variogram's Hann window, a fraction of half a scanline (0.35–0.7 read clean captures alike)
 _VARIOGRAM_WINDOW = 0.5
 
 
-def with_texture(data, pred: np.ndarray, rho: np.ndarray | None = None, variogram: bool = False):
+class TextureReading(NamedTuple):
+    """What :func:`with_texture` read: the data whitened by the texture (``None`` where the dark frame refused it),
+    a summary for the report, and the texture between scanlines (``None`` where refused)."""
+
+    data: object | None
+    summary: dict
+    cross: CrossTexture | None
+
+    @property
+    def refused(self) -> bool:
+        """Whether the dark frame refuted the texture the residuals claimed (the run stays with white noise)."""
+        return self.data is None
+
+
+def with_texture(
+    data, pred: np.ndarray, rho: np.ndarray | None = None, variogram: bool = False
+) -> TextureReading | None:
     """``data`` with the texture carried as a Gaussian process, a summary, and the texture the process leaves out.
 
-    Returns ``(data, summary, CrossTexture)``. The white noise is re-estimated with the texture from the
-    baseline's residuals (the lag-1 estimate counted texture as noise): its level off the highlight from the
-    channels' cross-covariance (:func:`white_noise_share`), its shape in the level and the lamp's inverse
-    irradiance from lag-1 differences (:func:`~wardjax.effects._texture.level_noise`); the
+    Returns a :class:`TextureReading` ``(data, summary, cross)``. The white noise is re-estimated with the
+    texture from the baseline's residuals (the lag-1 estimate counted texture as noise): its level off the
+    highlight from the channels' cross-covariance (:func:`white_noise_share`), its shape in the level and the
+    lamp's inverse irradiance from lag-1 differences (:func:`~wardjax.effects._texture.level_noise`); the
     process's autocovariance along the scanline is the measured one
     (:func:`~wardjax.effects._texture.joint_autocovariance`), and the
     covariance between neighbouring scanlines and channels goes into each
@@ -50,9 +73,9 @@ def with_texture(data, pred: np.ndarray, rho: np.ndarray | None = None, variogra
     ``variogram``: the covariance along the scanline from the cross-variogram
     (:func:`~wardjax.effects._texture.lag_covariances`), windowed over a quarter
     scanline: the guard's second opinion (:mod:`~wardjax.effects._recheck`).
-    Returns ``None`` if no texture is found, and ``(None, summary, None)`` where the dark frame refutes the
-    texture the residuals claim (``summary["refused"]``, with the claimed ``amplitude`` and the share of it the
-    dark frame shows, ``dark_shown`` ``[share, SE]``): the run then stays with white noise.
+    Returns ``None`` if no texture is found, and a reading that is ``refused`` (no data, no cross term) where the
+    dark frame refutes the texture the residuals claim (``summary["refused"]``, with the claimed ``amplitude`` and
+    the share of it the dark frame shows, ``dark_shown`` ``[share, SE]``): the run then stays with white noise.
     """
     if getattr(data, "kind", None) not in ("ratio", "brdf") or data.y.shape[1] < 8:
         return None
@@ -77,7 +100,8 @@ def with_texture(data, pred: np.ndarray, rho: np.ndarray | None = None, variogra
     dark = dark_refutes(data, e, off, pred, tex_var / np.maximum(mean_level, 1e-30) ** 2)
     amplitude = [float(v) for v in np.sqrt(tex_var) / np.maximum(mean_level, 1e-30)]
     if dark is not None and dark["refuted"]:
-        return None, {"refused": "dark frame", "amplitude": amplitude, "dark_shown": [dark["shown"], dark["se"]]}, None
+        refused = {"refused": "dark frame", "amplitude": amplitude, "dark_shown": [dark["shown"], dark["se"]]}
+        return TextureReading(None, refused, None)
     # a white-noise floor keeps the whitening well conditioned where the texture term took all the variance
     nu = np.maximum(nu, _NOISE_FLOOR * tex_var)
     # its shape in level and irradiance from lag-1 differences over all values (the highlight's shot noise), the
@@ -95,11 +119,14 @@ def with_texture(data, pred: np.ndarray, rho: np.ndarray | None = None, variogra
         summary["dark_shown"] = [dark["shown"], dark["se"]]
     lv = _levels(data, rho, m)
     if lv is None:  # no term, in the layout that has one (one compiled program for every fit of the run)
-        return dataclasses.replace(new, levels=_no_levels(data)), summary, CrossTexture(y, off, W, sigma, exact)
+        return TextureReading(
+            dataclasses.replace(new, levels=_no_levels(data)), summary, CrossTexture(y, off, W, sigma, exact)
+        )
     P = np.zeros((y.shape[0], y.shape[0]))
     P[: lv[0].shape[0]] = lv[0]
     summary["levels"] = lv[2]
-    return dataclasses.replace(new, levels=(P, lv[1])), summary, CrossTexture(y, off, W, sigma, exact, lv[2]["deff"])
+    cross = CrossTexture(y, off, W, sigma, exact, lv[2]["deff"])
+    return TextureReading(dataclasses.replace(new, levels=(P, lv[1])), summary, cross)
 
 
 def _no_levels(data) -> tuple[np.ndarray, np.ndarray]:
