@@ -75,14 +75,14 @@ def sandwich_pass(theta, rho_s, cov, scale, f, u, v, g, w, mean=None, e=None):
     resid = resid - mean[:, None]  # (3, N)
     # J's lobe part per observation: jl = M φ, φ = b₀ (1, x_1, …, x_k).
     scl = rho_s / alpha  # (k,) ∂f/∂α_k = (ρs/α_k) b ∂log b/∂log α_k
-    rows = [jnp.zeros(1 + k, theta.dtype).at[0].set(q)]
+    # M by its entries, None where structurally 0: row 0 maps φ to ∂f/∂ρs, row 1+i to ∂f/∂α_i.
+    lin = [[q] + [None] * k]
     for i in range(k):
-        rows.append(jnp.zeros(1 + k, theta.dtype).at[0].set(q * scl[i] * const).at[1 + i].set(q * scl[i] * slope[i]))
-    lin = jnp.stack(rows)  # (1+k, 1+k) M
+        lin.append([q * scl[i] * const] + [q * scl[i] * slope[i] if j == i else None for j in range(k)])
     r2 = (ww * resid) ** 2  # (3, N)
     if n <= LEVERAGE_SAMPLES:
         phi = [b0] + [b0 * x for x in xs]
-        jl = [jnp.asarray(sum(lin[i, j] * phi[j] for j in range(1 + k))) for i in range(1 + k)]  # 1+k of (N,)
+        jl = [_dot(row, phi) for row in lin]  # 1+k of (N,)
         bread = cov / jnp.where(scale > 0, scale, 1.0)
         # Leverage h = w J B⁻¹ Jᵀ per observation, from the ρd (one-hot/π) and lobe (jl) parts of J.
         cross = sum(bread[:3, 3 + i, None] * jl[i][None, :] for i in range(1 + k))  # (3, N)
@@ -100,32 +100,51 @@ def sandwich_pass(theta, rho_s, cov, scale, f, u, v, g, w, mean=None, e=None):
 
 
 def _covariance(sums, lin, cov, scale, k, pairs):
-    """``B⁻¹ meat B⁻¹`` from :func:`sandwich_pass`'s sums and the map ``M`` (``lin``) of the monomials to ``J``."""
-    dd = jnp.diag(jnp.stack(sums[:3])) / jnp.pi**2
-    phi_c = jnp.stack(sums[3:6])[:, None]  # (3, 1) Σ r²_c b₀
-    phi_c = jnp.concatenate([phi_c, jnp.stack(sums[6 : 6 + 3 * k]).reshape(3, k)], axis=1)  # (3, 1+k) Σ r²_c φ
+    """``B⁻¹ meat B⁻¹`` from :func:`sandwich_pass`'s sums and the map ``M`` (``lin``, nested lists) of the
+    monomials to ``J``.
+
+    Every product by its scalar entries (:func:`_product`): under ``vmap`` one elementwise loop over the
+    batch, where the (P, P) matrix products became library calls per member (~1 ms of XLA:CPU time per
+    1,024 scanlines, a fifth of what the sandwich added to the search).
+    """
+    p = 4 + k
+    ip = 1.0 / jnp.pi
+    phi_c = [[sums[3 + c]] + [sums[6 + c * k + i] for i in range(k)] for c in range(3)]  # Σ r²_c φ
     rest = sums[6 + 3 * k :]
     mom = {(0, 0): rest[0]}
     mom.update({(0, 1 + i): rest[1 + i] for i in range(k)})
     mom.update({(1 + i, 1 + j): rest[1 + k + m] for m, (i, j) in enumerate(pairs)})
-    phi2 = jnp.stack([jnp.stack([mom[min(i, j), max(i, j)] for j in range(1 + k)]) for i in range(1 + k)])
-    dl = _matmul(phi_c, lin.T) / jnp.pi  # (3, 1+k): Σ r²_c jl
-    ll = _matmul(_matmul(lin, phi2), lin.T)  # (1+k, 1+k): Σ r² jl jlᵀ
-    meat = jnp.block([[dd, dl], [dl.T, ll]])
-    bread = cov / jnp.where(scale > 0, scale, 1.0)
-    return _matmul(_matmul(bread, meat), bread)
+    phi2 = [[mom[min(i, j), max(i, j)] for j in range(1 + k)] for i in range(1 + k)]  # Σ r² φ φᵀ
+    lin_t = [list(col) for col in zip(*lin)]
+    dl = _product(phi_c, lin_t)  # (3, 1+k): π Σ r²_c jl
+    ll = _product(_product(lin, phi2), lin_t)  # (1+k, 1+k): Σ r² jl jlᵀ
+    meat = [[sums[c] * ip * ip if c == d else None for d in range(3)] + [x * ip for x in dl[c]] for c in range(3)]
+    meat += [[dl[c][i] * ip for c in range(3)] + ll[i] for i in range(1 + k)]
+    inv_scale = 1.0 / jnp.where(scale > 0, scale, 1.0)
+    bread = [[cov[i, j] * inv_scale for j in range(p)] for i in range(p)]
+    out = _product(_product(bread, meat), bread)
+    # Materialised entry by entry before they are stacked: fused into the stack, each entry re-derived
+    # the products it shares with the others (a single loop five times dearer than the matmuls).
+    out = jax.lax.optimization_barrier(out)
+    return jnp.stack([jnp.stack(row) for row in out])
+
+
+def _dot(x, y):
+    """``Σ x_i y_i`` over the entries that are not ``None`` (a structural 0); ``None`` where none is."""
+    terms = [a * b for a, b in zip(x, y) if a is not None and b is not None]
+    return sum(terms[1:], terms[0]) if terms else None
+
+
+def _product(a, b):
+    """``a @ b`` of small matrices held as nested lists of scalars (``None``: a structural 0)."""
+    cols = [[row[j] for row in b] for j in range(len(b[0]))]
+    return [[_dot(row, col) for col in cols] for row in a]
 
 
 def sum_samples(terms):
     """``[Σ_n x[n] for x in terms]`` of equally shaped ``(N,)`` arrays as one variadic reduction."""
     zeros = tuple(jnp.zeros((), x.dtype) for x in terms)
     return jax.lax.reduce(tuple(terms), zeros, lambda a, b: tuple(x + y for x, y in zip(a, b)), (0,))
-
-
-def _matmul(a, b):
-    """``a @ b`` of two small matrices as a broadcast product and sum: under ``vmap`` an elementwise
-    loop over the batch, where a batched matmul of 5×5 matrices runs one member at a time on XLA:CPU."""
-    return jnp.sum(a[:, :, None] * b[None, :, :], axis=1)
 
 
 __all__ = ["LEVERAGE_FLOOR", "LEVERAGE_SAMPLES", "sandwich_covariance", "sandwich_pass", "sum_samples"]

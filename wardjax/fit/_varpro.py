@@ -466,14 +466,14 @@ def covariance(theta, st: Stats, p: Prepared, scale):
     return cov * scale
 
 
-def curvature_check(theta, chi2, s_hat, p: Prepared, cov, scale, e):
+def curvature_check(theta, chi2, s_hat, p: Prepared, cov, scale):
     """Is the Gauss–Newton covariance trustworthy here? ``1`` where it is not (isotropic fits):
     :func:`curvature_pass`'s sums over the samples, then its verdict."""
-    terms, verdict = curvature_pass(theta, chi2, s_hat, p, cov, scale, e)
+    terms, verdict = curvature_pass(theta, chi2, s_hat, p, cov, scale)
     return verdict(sum_samples(terms))
 
 
-def curvature_pass(theta, chi2, s_hat, p: Prepared, cov, scale, e):
+def curvature_pass(theta, chi2, s_hat, p: Prepared, cov, scale):
     """The curvature check's per-sample terms and its verdict on their sums: ``(terms, verdict)``.
 
     The profiled χ² (the sums of :func:`stats` without derivatives) at two points about one standard
@@ -489,9 +489,9 @@ def curvature_pass(theta, chi2, s_hat, p: Prepared, cov, scale, e):
       ``(±1, ±r)``), χ² rises by ``2 z_θ² / (1 + |r|)``.
 
     The points are symmetric in ``1/α²``: ``1/α'² = (1 ± κ)/α̂²`` with ``κ = tanh 2σ_θ``, i.e.
-    ``θ' = θ̂ ± σ_θ + ½ log cosh 2σ_θ`` (``θ̂ ± σ_θ`` to second order in ``σ_θ``). Then the lobe's
-    exponentials there are ``e d`` and ``e / d`` with ``d = exp(−κ t/α̂²)`` and ``e`` the search's
-    own exponential at the optimum: one exponential per sample for both points.
+    ``θ' = θ̂ ± σ_θ + ½ log cosh 2σ_θ`` (``θ̂ ± σ_θ`` to second order in ``σ_θ``), where the lobe's
+    exponentials are ``exp(−(1 ± κ) t/α̂²)``: two per sample (the search's own ``e`` times and over
+    ``exp(−κ t/α̂²)`` cost more, the division and the select that guards it dearer than an exponential).
 
     The check fails when any of the four rises differs from its prediction by more than
     ``CURVATURE_TOL`` times the prediction (widened by the rounding allowance
@@ -512,10 +512,8 @@ def curvature_pass(theta, chi2, s_hat, p: Prepared, cov, scale, e):
     sign_r = jnp.where(r < 0, -1.0, 1.0)
     kappa = jnp.tanh(2.0 * sd_t)
     inv = jnp.exp(-2.0 * theta[0])
-    d = jnp.exp(-kappa * inv * p.x[0])
-    # Where d underflows (κ t/α² > 700) so does e: that sample's lobe is nil at both points.
-    ends = ((1.0, -0.5 * jnp.log1p(-kappa), jnp.where(d > 0, e / jnp.where(d > 0, d, 1.0), 0.0)),)
-    ends += ((-1.0, 0.5 * jnp.log1p(kappa), e * d),)
+    ends = ((1.0, -0.5 * jnp.log1p(-kappa), jnp.exp(-(1.0 - kappa) * inv * p.x[0])),)
+    ends += ((-1.0, 0.5 * jnp.log1p(kappa), jnp.exp(-(1.0 + kappa) * inv * p.x[0])),)
     # Both points' sums (``Σ gw e'`` per column, ``Σ gwf e'``, ``Σ g2w e'²``) in one variadic reduction:
     # one loop that reads the streams once, where a mat-vec per sum re-read them (XLA's cost analysis:
     # 18 MB of memory traffic for the check of 1,024 scanlines of 256 samples, not 50 MB).
@@ -631,7 +629,7 @@ def solve_scanline(
     # under load: +10–12 ms CPU over the search alone, against +7–9 ms for two).
     passes = []
     if iso and check:
-        passes.append(curvature_pass(theta, st.chi2, s, p, cov, scale, e))
+        passes.append(curvature_pass(theta, st.chi2, s, p, cov, scale))
     if raw is not None:
         mean = p.fbar - s * jnp.broadcast_to(st.bbar, (3,))
         passes.append(sandwich_pass(theta, s, cov, scale, *raw, mean=mean, e=e))
