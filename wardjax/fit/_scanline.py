@@ -536,7 +536,7 @@ def _profile_where_nonlinear(sol: _varpro.ScanlineSolution, data, *, normalizati
     chunk (:func:`_profile_lanes`); this pass takes the rest (a chunk with more failures, float32 fits,
     ``errors="profile"``). Rescales those rows of ``sol.cov`` (in place) so that its diagonal holds the
     profile variances; the correlations stay the Gauss–Newton ones. ``sol.nonlinear``
-    keeps which rows changed. Only these rows pay for the 33-point profiles,
+    keeps which rows changed. Only these rows pay for the profiles (12 evaluations each),
     split over ``devices`` along the scanline axis as :func:`_solve` splits the fits.
     """
     devices = _check_devices(devices)
@@ -548,7 +548,7 @@ def _profile_where_nonlinear(sol: _varpro.ScanlineSolution, data, *, normalizati
     n_true = data[0].shape[1]
     n_pad = _sample_bucket(n_true)
     sub = pad_samples(sub, n_pad)
-    # 33 profile points per row: at most a quarter of the fit's rows per call on an accelerator.
+    # 12 profile evaluations per row: at most a quarter of the fit's rows per call on an accelerator.
     chunk = min(_default_chunk(np.float64, devices), _ACCELERATOR_CHUNK // 4) * len(devices)
     scale = np.asarray(sol.chi2, np.float64)[rows] / np.maximum(np.asarray(sol.dof)[rows], 1)
     fit = [np.asarray(a, np.float64)[rows] for a in (sol.alpha[:, 0], sol.rho_s, sol.chi2, sol.cov_gn)]
