@@ -48,23 +48,42 @@ def _rate(data, errors: str, dtype) -> tuple[float, float]:
     return len(res) / best, float(np.mean(res.errors == "profile"))
 
 
-def _cpu_ms(fn, repeats: int = 7):
-    """Best CPU (process) time of ``fn()`` in ms, after one call to compile; and its result."""
-    out = jax.block_until_ready(fn())
-    best = np.inf
-    for _ in range(repeats):
-        t0 = time.process_time()
-        out = jax.block_until_ready(fn())
-        best = min(best, time.process_time() - t0)
-    return 1e3 * best, out
+ROUNDS = 40  # interleaved rounds of the stage timings
+
+
+def _interleaved(fns: dict, rounds: int = ROUNDS) -> dict:
+    """CPU (process) ms of each ``fns[k]()`` over ``rounds`` rounds, the functions taking turns within each
+    round (after one call each to compile), so that a change in the machine's state falls on all of them."""
+    for fn in fns.values():
+        jax.block_until_ready(fn())
+    ts = {k: [] for k in fns}
+    for _ in range(rounds):
+        for k, fn in fns.items():
+            t0 = time.process_time()
+            jax.block_until_ready(fn())
+            ts[k].append(1e3 * (time.process_time() - t0))
+    return {k: np.asarray(v) for k, v in ts.items()}
+
+
+def _paired(a, b) -> str:
+    """Median and quartiles of the paired differences ``a − b`` (ms): ``+m (q1–q3)``."""
+    q1, m, q3 = np.percentile(np.asarray(a) - np.asarray(b), [25, 50, 75])
+    return f"+{m:.1f} ({q1:.1f}–{q3:.1f})"
 
 
 def stages(rows: int = 1024) -> None:
-    """CPU time per stage of the default float64 path (unweighted: the sandwich is on) on one chunk."""
+    """CPU time per stage of the default float64 path (unweighted: the sandwich is on) on one chunk.
+
+    Each stage's cost beside the search is the median of paired differences over interleaved rounds: the
+    difference of two independent best times swung by more than the stage costs on a shared machine.
+    """
     from benchmarks.bench_fit import draw_scanlines
     from wardjax.fit import _data, _profile, _scanline
 
-    print(f"CPU ms per chunk of {rows:,} scanlines (best of 7), float64, no weights")
+    print(
+        f"CPU ms per chunk of {rows:,} scanlines, float64, no weights: medians over {ROUNDS} interleaved rounds; "
+        "each '+' column the median (quartiles) of the paired differences to the column before it"
+    )
     print(
         "| samples | geometry | moments | search | + check | + sandwich | + profiles in the program (rows) "
         "| profile of every row | exp floor |"
@@ -75,24 +94,36 @@ def stages(rows: int = 1024) -> None:
         with jax.enable_x64(True):
             args = [jnp.asarray(a) for a in (d.f_r, d.wi, d.wo)] + [None, None]
             f64 = np.dtype(np.float64)
-            geo, parts = _cpu_ms(lambda: _scanline._geometry_chunk(*args, normalization="ward1992", dtype=f64))
-            mom, prep = _cpu_ms(lambda: _data.moments_chunk(*parts, None, iso=True))
-            search = lambda check, raw=None: _scanline._search_chunk(prep, raw, iso=True, rtol=0.0, check=check)
-            gn, _ = _cpu_ms(lambda: search(False))
-            chk, sol = _cpu_ms(lambda: search(True))
-            sw, _ = _cpu_ms(lambda: search(True, parts))
+            geometry = lambda: _scanline._geometry_chunk(*args, normalization="ward1992", dtype=f64)
+            parts = jax.block_until_ready(geometry())
+            moments = lambda: _data.moments_chunk(*parts, None, iso=True)
+            prep = jax.block_until_ready(moments())
             lanes = _scanline._profile_lanes(rows, n)
-            full, out = _cpu_ms(
-                lambda: _scanline._search_chunk(prep, parts, iso=True, rtol=0.0, check=True, lanes=lanes)
+            search = lambda check, raw=None, lanes=0: _scanline._search_chunk(
+                prep, raw, iso=True, rtol=0.0, check=check, lanes=lanes
             )
-            done = int(np.sum(np.asarray(out.nonlinear) == _profile.PROFILED))
+            sol = search(True)
+            done = int(np.sum(np.asarray(search(True, parts, lanes).nonlinear) == _profile.PROFILED))
             fit = (sol.alpha[:, 0], sol.rho_s, sol.chi2, sol.cov_gn, sol.chi2 / sol.dof)
-            prof, _ = _cpu_ms(lambda: _profile.profile_chunk(prep, *fit))
             x = jnp.asarray(np.random.default_rng(0).uniform(0, 1, (rows, n)))
-            floor, _ = _cpu_ms(lambda: jax.jit(jnp.exp)(x))
+            exp = jax.jit(jnp.exp)
+            t = _interleaved(
+                {
+                    "geometry": geometry,
+                    "moments": moments,
+                    "gn": lambda: search(False),
+                    "check": lambda: search(True),
+                    "sandwich": lambda: search(True, parts),
+                    "lanes": lambda: search(True, parts, lanes),
+                    "profile": lambda: _profile.profile_chunk(prep, *fit),
+                    "floor": lambda: exp(x),
+                }
+            )
+        med = {k: float(np.median(v)) for k, v in t.items()}
         print(
-            f"| {n} | {geo:.1f} | {mom:.1f} | {gn:.1f} | +{chk - gn:.1f} | +{sw - chk:.1f} | "
-            f"+{full - sw:.1f} ({done}) | {prof:.1f} | {floor:.2f} |",
+            f"| {n} | {med['geometry']:.1f} | {med['moments']:.1f} | {med['gn']:.1f} | "
+            f"{_paired(t['check'], t['gn'])} | {_paired(t['sandwich'], t['check'])} | "
+            f"{_paired(t['lanes'], t['sandwich'])} ({done}) | {med['profile']:.1f} | {med['floor']:.2f} |",
             flush=True,
         )
 
