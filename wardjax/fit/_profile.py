@@ -60,10 +60,10 @@ def _crossing(delta_fn, x0, v0, step, direction):
     """Where ``√Δ`` reaches 1 going from the optimum ``x0`` in ``direction`` (±1): ``(t, v)``.
 
     ``delta_fn(x) -> (Δ, v)`` is the profile's rise (in residual variances) at ``x`` and the
-    value reported there, ``v0`` that value at the optimum. ``√Δ`` is linear in ``x`` where χ² is quadratic, so the first probe
-    at ``x0 ± step`` and the false-position steps after it (secant extrapolation until the
-    crossing is bracketed) converge in a few evaluations. Returns the crossing's distance
-    ``t`` and ``v`` interpolated there.
+    value reported there, ``v0`` that value at the optimum. ``√Δ`` is linear in ``x`` where χ²
+    is quadratic, so the first probe at ``x0 ± step`` and the false-position steps after it
+    (secant extrapolation until the crossing is bracketed) converge in a few evaluations.
+    Returns the crossing's distance ``t`` and ``v`` interpolated there.
     """
     t_max = PROFILE_HALF * step
     lo = (jnp.zeros_like(step), jnp.zeros_like(step), v0)  # (t, √Δ, v) below the crossing

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from typing import Any
+
 import jax
 import jax.numpy as jnp
 
@@ -129,13 +131,14 @@ def _covariance(sums, lin, cov, scale, k, pairs):
     return jnp.stack([jnp.stack(row) for row in out])
 
 
-def _dot(x, y):
-    """``Σ x_i y_i`` over the entries that are not ``None`` (a structural 0); ``None`` where none is."""
+def _dot(x, y) -> Any:
+    """``Σ x_i y_i`` over the entries that are not ``None`` (a structural 0); ``None`` where none is
+    (never for the products :func:`_covariance` forms: every row of ``M`` has its first entry)."""
     terms = [a * b for a, b in zip(x, y) if a is not None and b is not None]
     return sum(terms[1:], terms[0]) if terms else None
 
 
-def _product(a, b):
+def _product(a, b) -> list[list[Any]]:
     """``a @ b`` of small matrices held as nested lists of scalars (``None``: a structural 0)."""
     cols = [[row[j] for row in b] for j in range(len(b[0]))]
     return [[_dot(row, col) for col in cols] for row in a]
