@@ -96,10 +96,11 @@ def stages(rows: int = 1024) -> None:
             f64 = np.dtype(np.float64)
             geometry = lambda: _scanline._geometry_chunk(*args, normalization="ward1992", dtype=f64)
             parts = jax.block_until_ready(geometry())
-            moments = lambda: _data.moments_chunk(*parts, None, iso=True)
+            small = _scanline._small_programs(_scanline._sample_bucket(n), jax.devices())  # as fit_scanlines picks
+            moments = lambda: _data.moments_chunk.pick(small)(*parts, None, iso=True)
             prep = jax.block_until_ready(moments())
             lanes = _scanline._profile_lanes(rows, n)
-            search = lambda check, raw=None, lanes=0: _scanline._search_chunk(
+            search = lambda check, raw=None, lanes=0: _scanline._search_chunk.pick(small)(
                 prep, raw, iso=True, rtol=0.0, check=check, lanes=lanes
             )
             sol = search(True)
@@ -115,7 +116,7 @@ def stages(rows: int = 1024) -> None:
                     "check": lambda: search(True),
                     "sandwich": lambda: search(True, parts),
                     "lanes": lambda: search(True, parts, lanes),
-                    "profile": lambda: _profile.profile_chunk(prep, *fit),
+                    "profile": lambda: _profile.profile_chunk.pick(small)(prep, *fit),
                     "floor": lambda: exp(x),
                 }
             )
