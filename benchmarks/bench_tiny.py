@@ -31,6 +31,7 @@ import wardjax as wj
 from wardjax.fit import _data, _feed, _scanline
 
 from .bench_fit import REPEATS, draw_scanlines, scipy_fit, z_sd
+from .bench_profile import ROUNDS, _interleaved
 from .bench_synthesis import _best_of
 
 SPAN = (1.5, 4.0)  # half-width of the samples around the highlight, in α (half-vector slope)
@@ -66,17 +67,6 @@ def bench_tiny(n: int, k: int, scipy_n: int) -> None:
     print(f"| SciPy LM, analytic Jacobian | {scipy_rate:,.0f} | {1e6 / scipy_rate:,.0f} s | | | 1 | | | |")
 
 
-def _cpu_ms(fn, repeats: int = 2 * REPEATS) -> float:
-    """Best process CPU time of ``fn()`` (its results ready) after one call to compile, in ms."""
-    jax.block_until_ready(fn())
-    best = float("inf")
-    for _ in range(repeats):
-        c0 = time.process_time()
-        jax.block_until_ready(fn())
-        best = min(best, time.process_time() - c0)
-    return 1e3 * best
-
-
 def stages(k: int, rows: int | None = None) -> None:
     """Where a chunk's time goes: CPU ms of each compiled stage of one chunk of ``rows`` problems (default:
     the rows of a chunk of ``fit_scanlines``)."""
@@ -96,16 +86,22 @@ def stages(k: int, rows: int | None = None) -> None:
             prep, raw, iso=True, rtol=0.0, check=check, lanes=lanes
         )
         pending = float(np.mean(np.asarray(search(parts, True).nonlinear) != 0))
-        t = {
-            "geometry": _cpu_ms(geometry),
-            "moments": _cpu_ms(moments),
-            "search (Gauss–Newton)": _cpu_ms(search),
-            "search + curvature check": _cpu_ms(lambda: search(check=True)),
-            "search + sandwich": _cpu_ms(lambda: search(parts)),
-            "search + check + sandwich": _cpu_ms(lambda: search(parts, True)),
-            f"search + check + sandwich + profiles ({lanes} lanes)": _cpu_ms(lambda: search(parts, True, lanes)),
-        }
-    print(f"\nOne chunk of {rows:,} problems of {k} samples, CPU ms per compiled stage (best of {2 * REPEATS});")
+        runs = _interleaved(
+            {
+                "geometry": geometry,
+                "moments": moments,
+                "search (Gauss–Newton)": search,
+                "search + curvature check": lambda: search(check=True),
+                "search + sandwich": lambda: search(parts),
+                "search + check + sandwich": lambda: search(parts, True),
+                f"search + check + sandwich + profiles ({lanes} lanes)": lambda: search(parts, True, lanes),
+            }
+        )
+        t = {name: float(np.median(ms)) for name, ms in runs.items()}
+    print(
+        f"\nOne chunk of {rows:,} problems of {k} samples, CPU ms per compiled stage (medians over {ROUNDS} "
+        "rounds, the stages taking turns);"
+    )
     print(f"the curvature check fails on {pending:.1%} of them (profiled in the search program)")
     print("| stage | CPU ms | µs per fit |")
     print("| --- | --- | --- |")
