@@ -2,7 +2,7 @@
 
 The Gauss–Newton covariance of a scanline fit is the inverse curvature of χ² at the
 optimum; it is honest while χ² is quadratic over about one standard error. Where the
-curvature check of :func:`wardjax.fit._varpro.curvature_check` says it is not (a lobe
+curvature check of :func:`wardjax.fit._varpro.curvature_pass` says it is not (a lobe
 spanning few samples, a weakly detected lobe: χ² skewed in α), the 68 % profile-likelihood
 interval replaces it (Venzon & Moolgavkar 1988; the likelihood-ratio interval of
 Wilks' theorem):

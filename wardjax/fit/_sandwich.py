@@ -14,14 +14,7 @@ LEVERAGE_FLOOR = 1e-6
 LEVERAGE_SAMPLES = 64
 
 
-def sandwich_covariance(theta, rho_s, cov, scale, f, u, v, g, w, mean=None, e=None):
-    """Heteroscedasticity-consistent (sandwich) covariance of ``(ρd RGB, ρs, α…)``: :func:`sandwich_pass`'s
-    sums over the samples, then its covariance. Returns (P, P)."""
-    terms, finish = sandwich_pass(theta, rho_s, cov, scale, f, u, v, g, w, mean=mean, e=e)
-    return finish(sum_samples(terms))
-
-
-def sandwich_pass(theta, rho_s, cov, scale, f, u, v, g, w, mean=None, e=None):
+def sandwich_pass(theta, rho_s, cov, scale, f, u, v, g, w, mean, e):
     """Heteroscedasticity-consistent (sandwich, HC3) covariance of ``(ρd RGB, ρs, α…)``.
 
     ``Σ_HC = B⁻¹ (Σ_i w_i² r_i² / (1 − h_i)² · J_iᵀ J_i) B⁻¹`` (White 1980; the leverage
@@ -45,13 +38,11 @@ def sandwich_pass(theta, rho_s, cov, scale, f, u, v, g, w, mean=None, e=None):
 
     One pass over the samples at the optimum ``θ`` (log α, or log αx, log αy) and ``ρs``:
     ``f`` (3, N), ``u, v, g`` (N,), ``w`` (C, N) as the kernel's geometry stage leaves them
-    (sample axis last, weight 0 where a value is unusable). ``mean`` (3,), optional: the
-    weighted mean of ``f − ρs b`` per channel (``ρd/π``), where the search already holds it;
-    without it one more pass over the samples forms it. ``e`` (N,), optional: the lobe's
-    exponential ``exp(−u/αx² − v/αy²)`` at ``θ``, where the search already holds it (one
-    exponential per sample less). Returns ``(terms, finish)``: the per-sample terms (equally shaped
-    ``(N,)`` arrays) whose sums over the samples the meat needs, and ``finish(sums) -> (P, P)``, so that
-    a caller can fold them into one reduction with other sums over the same samples.
+    (sample axis last, weight 0 where a value is unusable). ``mean`` (3,): the weighted mean of
+    ``f − ρs b`` per channel (``ρd/π``), and ``e`` (N,): the lobe's exponential
+    ``exp(−u/αx² − v/αy²)`` at ``θ``, both as the search holds them. Returns ``(terms, finish)``: the
+    per-sample terms (equally shaped ``(N,)`` arrays) whose sums over the samples the meat needs, and
+    ``finish(sums) -> (P, P)``, the covariance from them.
     """
     k = theta.shape[0]
     n = g.shape[0]
@@ -65,16 +56,9 @@ def sandwich_pass(theta, rho_s, cov, scale, f, u, v, g, w, mean=None, e=None):
         xs = [u, v]
         q = jnp.exp(-theta[0] - theta[1])
         slope, const = 2.0 * inv2, -1.0
-    if e is None:
-        e = jnp.exp(-sum(x * inv2[i] for i, x in enumerate(xs)))
     b0 = g * e
     ww = jnp.broadcast_to(w, (3, n))
-    resid = f - (rho_s * q) * b0[None, :]
-    if mean is None:
-        # ρd per channel at this (θ, ρs) solves its normal equation: the weighted mean of f − ρs b.
-        wsum = jnp.where(ww.sum(-1) > 0, ww.sum(-1), 1.0)
-        mean = jnp.sum(ww * resid, axis=-1) / wsum
-    resid = resid - mean[:, None]  # (3, N)
+    resid = f - (rho_s * q) * b0[None, :] - mean[:, None]  # (3, N)
     # J's lobe part per observation: jl = M φ, φ = b₀ (1, x_1, …, x_k).
     scl = rho_s / alpha  # (k,) ∂f/∂α_k = (ρs/α_k) b ∂log b/∂log α_k
     # M by its entries, None where structurally 0: row 0 maps φ to ∂f/∂ρs, row 1+i to ∂f/∂α_i.
@@ -150,4 +134,4 @@ def sum_samples(terms):
     return jax.lax.reduce(tuple(terms), zeros, lambda a, b: tuple(x + y for x, y in zip(a, b)), (0,))
 
 
-__all__ = ["LEVERAGE_FLOOR", "LEVERAGE_SAMPLES", "sandwich_covariance", "sandwich_pass", "sum_samples"]
+__all__ = ["LEVERAGE_FLOOR", "LEVERAGE_SAMPLES", "sandwich_pass", "sum_samples"]

@@ -42,7 +42,7 @@ import jax.numpy as jnp
 from jaxtyping import Array, Float, Int
 
 from .._status import Status
-from ._sandwich import sandwich_covariance, sandwich_pass, sum_samples
+from ._sandwich import sandwich_pass, sum_samples
 
 # Search range of α. Below 1e-4 no camera resolves a lobe; above 2 the lobe is
 # flat over the hemisphere and α no longer has a meaning.
@@ -466,13 +466,6 @@ def covariance(theta, st: Stats, p: Prepared, scale):
     return cov * scale
 
 
-def curvature_check(theta, chi2, s_hat, p: Prepared, cov, scale):
-    """Is the Gauss–Newton covariance trustworthy here? ``1`` where it is not (isotropic fits):
-    :func:`curvature_pass`'s sums over the samples, then its verdict."""
-    terms, verdict = curvature_pass(theta, chi2, s_hat, p, cov, scale)
-    return verdict(sum_samples(terms))
-
-
 def curvature_pass(theta, chi2, s_hat, p: Prepared, cov, scale):
     """The curvature check's per-sample terms and its verdict on their sums: ``(terms, verdict)``.
 
@@ -560,11 +553,11 @@ def solve_scanline(
 ) -> ScanlineSolution:
     """Search and statistics of one prepared scanline (stage B, vmapped over a chunk).
 
-    ``check``: run :func:`curvature_check` (isotropic fits).
+    ``check``: run the curvature check, :func:`curvature_pass` (isotropic fits).
     ``steps``: LM steps after the grid start (default ``ISO_STEPS``; the
     anisotropic fit takes ``ANISO_STEPS`` more).
-    ``raw``: ``(f, u, v, g, w)`` of the geometry stage, given to report the
-    :func:`sandwich_covariance` as ``cov`` (``cov_gn`` keeps Gauss–Newton's), formed
+    ``raw``: ``(f, u, v, g, w)`` of the geometry stage, given to report the sandwich covariance
+    (:func:`~wardjax.fit._sandwich.sandwich_pass`) as ``cov`` (``cov_gn`` keeps Gauss–Newton's), formed
     in the same program at the optimum, with ρd/π taken from the search.
     """
     n_steps = ISO_STEPS if steps is None else steps
@@ -641,4 +634,4 @@ def solve_scanline(
     return ScanlineSolution(rho_d, s, jnp.exp(theta), reported, st.chi2, dof, status, nonlinear, cov)
 
 
-__all__ = ["Prepared", "ScanlineSolution", "prepare", "sandwich_covariance", "solve_scanline"]
+__all__ = ["Prepared", "ScanlineSolution", "prepare", "solve_scanline"]
