@@ -15,6 +15,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .. import _shapes
+from .._jit import options_jit
 from . import _varpro
 
 __all__ = [
@@ -147,33 +148,60 @@ def clean(f, wi, wo, mask, weights, dtype):
 SMALL_SAMPLES = 32
 _SMALL_OPTIONS = {"xla_cpu_experimental_ynn_fusion_type": ""}
 
+# The sums XLA:CPU forms itself (the reductions YNNPACK does not take: the curvature check's and the
+# sandwich's) are one serial chain of adds in IEEE order, one value at a time. Allowed to reassociate
+# them (LLVM's fast-math flags with NaNs, infinities, division and library functions still exact), it
+# vectorises them: sums that differ in the last bits, and per 1,024 scanlines of 256 samples (one core)
+# the sandwich's reduction 1.6 → 1.1 ms, the check's 0.38 → 0.25 ms. Other backends ignore the options.
+_REASSOCIATE_OPTIONS = {
+    "xla_cpu_enable_fast_math": True,
+    "xla_cpu_fast_math_honor_nans": True,
+    "xla_cpu_fast_math_honor_infs": True,
+    "xla_cpu_fast_math_honor_division": True,
+    "xla_cpu_fast_math_honor_functions": True,
+}
+
 
 @functools.cache
-def _small_options() -> dict:
-    """:data:`_SMALL_OPTIONS` where this XLA knows them (one trivial compile to ask), else none."""
+def _known(options: tuple) -> dict:
+    """``dict(options)`` where this XLA knows them all (one trivial compile to ask), else none."""
     try:
-        jax.jit(lambda x: x + 1, compiler_options=_SMALL_OPTIONS).lower(np.float32(0)).compile()
-    except Exception:  # an XLA without the option (older, or renamed): the default programs serve
+        jax.jit(lambda x: x + 1, compiler_options=dict(options)).lower(np.float32(0)).compile()
+    except Exception:  # an XLA without an option (older, or renamed): the default programs serve
         return {}
-    return dict(_SMALL_OPTIONS)
+    return dict(options)
+
+
+def _small_options() -> dict:
+    """:data:`_SMALL_OPTIONS` where this XLA knows them, else none."""
+    return _known(tuple(_SMALL_OPTIONS.items()))
+
+
+def _reassociate_options() -> dict:
+    """:data:`_REASSOCIATE_OPTIONS` where this XLA knows them, else none."""
+    return _known(tuple(_REASSOCIATE_OPTIONS.items()))
 
 
 class Kernel:
     """A function jitted twice: the general program, and one for small problems on a CPU.
 
-    Called directly it is ``jax.jit(fn, **jit_kw)``; :meth:`pick` returns the program compiled
-    without YNNPACK fusions (see :data:`SMALL_SAMPLES`) when ``small`` is true. Both compute the
-    same sums, in a different order (results equal to rounding).
+    Called directly it is the general program; :meth:`pick` returns the program compiled without
+    YNNPACK fusions (see :data:`SMALL_SAMPLES`) when ``small`` is true. Both are compiled with
+    :data:`_REASSOCIATE_OPTIONS` and compute the same sums, in a different order (results equal to
+    rounding).
     """
 
     def __init__(self, fn, **jit_kw):
         self._fn, self._kw = fn, jit_kw
-        self.general = jax.jit(fn, **jit_kw)
         functools.update_wrapper(self, fn)
 
     @functools.cached_property
+    def general(self):
+        return options_jit(self._fn, _reassociate_options(), **self._kw)
+
+    @functools.cached_property
     def small(self):
-        return jax.jit(self._fn, compiler_options=_small_options(), **self._kw)
+        return options_jit(self._fn, {**_reassociate_options(), **_small_options()}, **self._kw)
 
     def pick(self, small: bool):
         """The program for a problem of few samples on a CPU (``small``), or the general one."""

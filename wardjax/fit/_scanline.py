@@ -274,7 +274,7 @@ def fit_scanlines(
     dtype
         ``float64`` (default) or ``float32`` for speed (about twice the
         rate on float32 inputs). Results are float64; scanlines whose
-        float32 fit is not certified (``max_steps``, ``nonfinite``) are
+        float32 fit is not certified (any status but ``converged``) are
         fitted again in float64, so float32 loses no accuracy.
     chunk_size
         Scanlines per compiled call and device; default 1024 on CPU (4,096 for up to 16 samples,
@@ -356,10 +356,11 @@ def _refit_uncertified(sol: _varpro.ScanlineSolution, data, *, devices, **kw) ->
     """``sol`` with the float32 fits that are not certified fitted again in float64 (in place).
 
     Rounding can cancel the algebraic centring into a spurious optimum (~3 in 10⁴ scanlines with
-    broad lobes): those rows (status ``max_steps`` or ``nonfinite``) take float64's results, profiled
-    or pending alike.
+    broad lobes), which float32 does not certify but may report as any other outcome (``max_steps``,
+    ``nonfinite``, and ``insufficient_data`` where its sums are reassociated or fused otherwise): every
+    row whose status is not ``converged`` takes float64's results, profiled or pending alike.
     """
-    redo = np.flatnonzero(np.isin(sol.status, (Status.MAX_STEPS, Status.NONFINITE)))
+    redo = np.flatnonzero(sol.status != Status.CONVERGED)
     if redo.size:
         if not np.asarray(sol.cov_gn).flags.writeable:  # no row was pending (see _to_host): now some may be
             sol = sol._replace(cov_gn=np.array(sol.cov_gn))

@@ -15,27 +15,14 @@ from __future__ import annotations
 
 import functools
 
-import jax
-from jax.core import Tracer
+from .._jit import options_jit
 
 COMPILER_OPTIONS = {"xla_cpu_multi_thread_eigen": False}
 
 
 def texture_jit(fun=None, **kwargs):
-    """:func:`jax.jit` with :data:`COMPILER_OPTIONS`; usable bare (``@texture_jit``) or with jit's keywords.
-
-    JAX takes compiler options only for a top-level program: called on
-    tracers (inside another program, which has the options itself), the
-    function is traced as a plain ``jax.jit``.
-    """
+    """:func:`~wardjax._jit.options_jit` with :data:`COMPILER_OPTIONS`; usable bare (``@texture_jit``) or
+    with jit's keywords."""
     if fun is None:
         return functools.partial(texture_jit, **kwargs)
-    top = jax.jit(fun, compiler_options=COMPILER_OPTIONS, **kwargs)
-    nested = jax.jit(fun, **kwargs)
-
-    @functools.wraps(fun)
-    def call(*args, **kw):
-        traced = any(isinstance(x, Tracer) for x in jax.tree_util.tree_leaves((args, kw)))
-        return (nested if traced else top)(*args, **kw)
-
-    return call
+    return options_jit(fun, COMPILER_OPTIONS, **kwargs)
