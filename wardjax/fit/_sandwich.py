@@ -14,7 +14,7 @@ LEVERAGE_FLOOR = 1e-6
 LEVERAGE_SAMPLES = 64
 
 
-def sandwich_pass(theta, rho_s, cov, scale, f, u, v, g, w, mean, e):
+def sandwich_pass(theta, rho_s, cov, scale, f, x, g, w, mean):
     """Heteroscedasticity-consistent (sandwich, HC3) covariance of ``(ρd RGB, ρs, α…)``.
 
     ``Σ_HC = B⁻¹ (Σ_i w_i² r_i² / (1 − h_i)² · J_iᵀ J_i) B⁻¹`` (White 1980; the leverage
@@ -30,30 +30,32 @@ def sandwich_pass(theta, rho_s, cov, scale, f, u, v, g, w, mean, e):
     scanline of 256 samples the two differ by well under 1 %).
 
     The lobe's part of ``J_i`` is a fixed linear map ``M`` of the monomials
-    ``φ_i = b₀ (1, x_1, …, x_k)`` with ``b₀ = g e`` and ``x = t`` (isotropic) or ``(u, v)``:
+    ``φ_i = b₀ (1, x_1, …, x_k)`` with ``b₀ = g e``, ``e = exp(−Σ_k x_k/α_k²)`` and ``x = t`` (isotropic)
+    or ``(u, v)``:
     ``∂log b/∂log α_k = a_k x_k + c`` (``a = 2/α²``, ``c = −2``; anisotropic ``a_k = 2/α_k²``,
     ``c = −1``). So the meat's sums are ``M Σ r²_c φ`` and ``M (Σ r² φ φᵀ) Mᵀ``: per sample one
     residual and products of ``b₀`` with the geometry, no per-sample Jacobian, and all sums in
     one variadic reduction over the samples.
 
     One pass over the samples at the optimum ``θ`` (log α, or log αx, log αy) and ``ρs``:
-    ``f`` (3, N), ``u, v, g`` (N,), ``w`` (C, N) as the kernel's geometry stage leaves them
-    (sample axis last, weight 0 where a value is unusable). ``mean`` (3,): the weighted mean of
-    ``f − ρs b`` per channel (``ρd/π``), and ``e`` (N,): the lobe's exponential
-    ``exp(−u/αx² − v/αy²)`` at ``θ``, both as the search holds them. Returns ``(terms, finish)``: the
-    per-sample terms (equally shaped ``(N,)`` arrays) whose sums over the samples the meat needs, and
-    ``finish(sums) -> (P, P)``, the covariance from them.
+    ``f`` (3, N), ``g`` (N,), ``w`` (C, N) as the kernel's geometry stage leaves them (sample axis
+    last, weight 0 where a value is unusable), ``x`` (k, N) the search's geometry (``t``, or ``u, v``),
+    and ``mean`` (3,) the weighted mean of ``f − ρs b`` per channel (``ρd/π``) as the search holds it.
+    The exponential is formed again inside the pass: in the vectorised reduction one per sample
+    cost less than carrying the search's through its steps. Returns ``(terms, finish)``: the
+    per-sample terms (equally shaped ``(N,)`` arrays) whose sums over the samples the meat needs,
+    and ``finish(sums) -> (P, P)``, the covariance from them.
     """
     k = theta.shape[0]
     n = g.shape[0]
     alpha = jnp.exp(theta)
     inv2 = jnp.exp(-2.0 * theta)  # (k,) 1/α_k²
+    xs = [x[i] for i in range(k)]
+    e = jnp.exp(-sum(xs[i] * inv2[i] for i in range(k)))
     if k == 1:
-        xs = [u + v]
         q = inv2[0]  # b = q b₀
         slope, const = 2.0 * inv2, -2.0
     else:
-        xs = [u, v]
         q = jnp.exp(-theta[0] - theta[1])
         slope, const = 2.0 * inv2, -1.0
     b0 = g * e

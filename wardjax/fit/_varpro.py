@@ -251,7 +251,7 @@ def lobe_exp(theta, p: Prepared, iso: bool):
     return jnp.exp(-(p.x[0] * ix + p.x[1] * iy)), jnp.exp(-theta[0] - theta[1])
 
 
-def stats(theta, p: Prepared, iso: bool, with_jac: bool = True, e=None) -> Stats:
+def stats(theta, p: Prepared, iso: bool, with_jac: bool = True) -> Stats:
     """Profiled χ², ``s`` and the Kaufman normal equations at ``θ``.
 
     One exponential per sample, then weighted sums of the streams of
@@ -265,10 +265,7 @@ def stats(theta, p: Prepared, iso: bool, with_jac: bool = True, e=None) -> Stats
     k = 1 if iso else 2
     inv = ix = jnp.exp(-2.0 * theta[0])
     iy = inv if iso else jnp.exp(-2.0 * theta[1])
-    if e is None:  # else the caller's lobe_exp(θ), which it holds
-        e, q = lobe_exp(theta, p, iso)
-    else:
-        q = inv if iso else jnp.exp(-theta[0] - theta[1])
+    e, q = lobe_exp(theta, p, iso)
     # The barrier makes XLA compute e once, in its own vectorised loop,
     # instead of re-deriving it inside every sum that reads it; the sums are
     # dot products, which XLA:CPU vectorises (a fused multiply-reduce runs as
@@ -371,8 +368,8 @@ def grid_start(p: Prepared) -> Array:
 
 
 def lm(theta0, p: Prepared, iso: bool, steps: int, rtol: float):
-    """``steps`` Levenberg–Marquardt iterations on the reduced problem: ``(θ, Stats, e)`` at the last
-    accepted point, ``e`` its :func:`lobe_exp` (for the checks after the search).
+    """``steps`` Levenberg–Marquardt iterations on the reduced problem: ``(θ, Stats)`` at the last
+    accepted point.
 
     Marquardt's scaling (``λ diag(JᵀJ)``), ``λ`` divided by 3 on success and
     multiplied by 10 on failure. A step is accepted when it lowers χ² by more
@@ -383,26 +380,24 @@ def lm(theta0, p: Prepared, iso: bool, steps: int, rtol: float):
     tiny = jnp.finfo(theta0.dtype).tiny
 
     def body(_, carry):
-        theta, st, e, lam = carry
+        theta, st, lam = carry
         h = st.jtj + lam * jnp.diag(jnp.diag(st.jtj)) + tiny * jnp.eye(theta.shape[0], dtype=theta.dtype)
         step = -_solve_small(h, st.jtr)
         trial = jnp.clip(theta + step, lo, hi)
-        e_new = lobe_exp(trial, p, iso)[0]
-        st_new = stats(trial, p, iso, e=e_new)
+        st_new = stats(trial, p, iso)
         ok = jnp.isfinite(st_new.chi2) & (st_new.chi2 < st.chi2 + rtol * p.k0)
         ok = ok & jnp.any(trial != theta)
         theta = jnp.where(ok, trial, theta)
-        st, e = jax.tree_util.tree_map(lambda a, b: jnp.where(ok, a, b), (st_new, e_new), (st, e))
+        st = jax.tree_util.tree_map(lambda a, b: jnp.where(ok, a, b), st_new, st)
         lam = jnp.where(ok, jnp.maximum(lam / 3.0, 1e-12), jnp.minimum(lam * 10.0, 1e12))
-        return theta, st, e, lam
+        return theta, st, lam
 
-    e0 = lobe_exp(theta0, p, iso)[0]
-    carry = (theta0, stats(theta0, p, iso, e=e0), e0, jnp.asarray(1e-3, theta0.dtype))
+    carry = (theta0, stats(theta0, p, iso), jnp.asarray(1e-3, theta0.dtype))
     # A fixed number of steps in a loop, not unrolled: unrolled, XLA:CPU fused
     # the chain of accept/reject selects into every later step and re-evaluated
     # the whole history each time (anisotropic search 2-3.5x slower, iso equal).
-    theta, st, e, _ = jax.lax.fori_loop(0, steps, body, carry)
-    return theta, st, e
+    theta, st, _ = jax.lax.fori_loop(0, steps, body, carry)
+    return theta, st
 
 
 class ScanlineSolution(NamedTuple):
@@ -483,8 +478,7 @@ def curvature_pass(theta, chi2, s_hat, p: Prepared, cov, scale):
 
     The points are symmetric in ``1/α²``: ``1/α'² = (1 ± κ)/α̂²`` with ``κ = tanh 2σ_θ``, i.e.
     ``θ' = θ̂ ± σ_θ + ½ log cosh 2σ_θ`` (``θ̂ ± σ_θ`` to second order in ``σ_θ``), where the lobe's
-    exponentials are ``exp(−(1 ± κ) t/α̂²)``: two per sample (the search's own ``e`` times and over
-    ``exp(−κ t/α̂²)`` cost more, the division and the select that guards it dearer than an exponential).
+    exponentials are ``exp(−(1 ± κ) t/α̂²)``: two per sample.
 
     The check fails when any of the four rises differs from its prediction by more than
     ``CURVATURE_TOL`` times the prediction (widened by the rounding allowance
@@ -509,12 +503,10 @@ def curvature_pass(theta, chi2, s_hat, p: Prepared, cov, scale):
     ends += ((-1.0, 0.5 * jnp.log1p(kappa), jnp.exp(-(1.0 + kappa) * inv * p.x[0])),)
     # Both points' sums (``Σ gw e'`` per column, ``Σ gwf e'``, ``Σ g2w e'²``) in one variadic reduction:
     # one loop that reads the streams once, where a mat-vec per sum re-read them (XLA's cost analysis:
-    # 18 MB of memory traffic for the check of 1,024 scanlines of 256 samples, not 50 MB).
-    # The two points' exponentials materialised before the reduction (stacked behind a barrier): fused
-    # into it, XLA:CPU evaluated the exponential one value at a time inside the reduction's serial loop
-    # (these sums alone, 1,024 × 256 samples: 5.2–5.5 ms CPU fused, 2.1–2.6 ms materialised); a lone
-    # barrier did not survive fusion, the stacked one does.
-    both = jax.lax.optimization_barrier(jnp.stack([e_t for _, _, e_t in ends]))
+    # 18 MB of memory traffic for the check of 1,024 scanlines of 256 samples, not 50 MB). The
+    # exponentials are formed inside it: with the sums reassociated (the kernels' compiler options) the
+    # loop is vectorised, and materialising them first cost 0.1–0.2 ms more per 1,024 scanlines.
+    both = [e_t for _, _, e_t in ends]
     terms = []
     for e_t in both:
         terms += [*(p.gw * e_t[None, :]), p.gwf * e_t, p.g2w * e_t * e_t]
@@ -563,11 +555,11 @@ def solve_scanline(
     n_steps = ISO_STEPS if steps is None else steps
     theta = grid_start(p)
     if iso:
-        theta, st, e = lm(theta, p, True, n_steps, rtol)
+        theta, st = lm(theta, p, True, n_steps, rtol)
     else:
         # Start from αx = αy at the grid optimum; the 2-D steps move both.
         theta = jnp.concatenate([theta, theta])
-        theta, st, e = lm(theta, p, False, n_steps + ANISO_STEPS, rtol)
+        theta, st = lm(theta, p, False, n_steps + ANISO_STEPS, rtol)
     k = theta.shape[0]
     n_par = 4 + k
     n_samples = p.n_samples
@@ -619,13 +611,14 @@ def solve_scanline(
     )
     # The curvature check and the sandwich, both sums over the samples at the optimum: a reduction each.
     # One variadic reduction of all 18 sums (samples read once) cost more than two (1,024 × 256 samples,
-    # one core, median of 100 paired runs: +4.8 ms over the search alone, against +4.2–4.5 ms for two).
+    # one core, median of paired runs: 0.3 ms more).
     passes = []
     if iso and check:
         passes.append(curvature_pass(theta, st.chi2, s, p, cov, scale))
     if raw is not None:
         mean = p.fbar - s * jnp.broadcast_to(st.bbar, (3,))
-        passes.append(sandwich_pass(theta, s, cov, scale, *raw, mean=mean, e=e))
+        f, _, _, g, w = raw
+        passes.append(sandwich_pass(theta, s, cov, scale, f, p.x, g, w, mean))
     done = [finish(sum_samples(terms)) for terms, finish in passes]
     nonlinear = done.pop(0) if iso and check else jnp.zeros((), jnp.int32)
     nonlinear = jnp.where(status == Status.CONVERGED, 2 * nonlinear, 0)  # 2: the profile is pending
