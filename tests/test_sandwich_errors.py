@@ -83,12 +83,14 @@ def test_few_samples_per_fit_errors_are_honest():
 
 @pytest.mark.slow  # two sample counts, two compiled programs
 def test_small_problems_do_not_depend_on_padding():
-    """Fits of 9 samples (compiled for 9) equal those of the same samples padded with unusable ones to 12."""
+    """Fits of 9 samples (compiled for 9) equal those of the same samples padded with unusable ones to 12: to
+    far below the convergence test's 10⁻³ σ (the sums are vectorised, so their order of addition, and
+    their rounding, depends on the padded length)."""
     d = draw_scanlines(40, (0.03, 0.3), n=9, span=(1.5, 4.0), seed=6)
     res = wj.fit_scanlines(d.f_r, d.wi, d.wo)
     pad = lambda a, v: np.concatenate([a, np.full(a.shape[:1] + (3, 3), v)], axis=1)
     padded = wj.fit_scanlines(pad(d.f_r, np.nan), pad(d.wi, np.nan), pad(d.wo, np.nan))
     assert res.ok.mean() > 0.9
     np.testing.assert_array_equal(res.status, padded.status)
-    np.testing.assert_allclose(padded.params.alpha_x, res.params.alpha_x, rtol=1e-9)
-    np.testing.assert_allclose(padded.covariance, res.covariance, rtol=1e-6, atol=1e-14)
+    assert np.all(np.abs(padded.params.alpha_x - res.params.alpha_x) <= 1e-5 * res.stderr.alpha_x)
+    np.testing.assert_allclose(padded.covariance, res.covariance, rtol=1e-4, atol=1e-14)

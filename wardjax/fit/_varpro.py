@@ -232,12 +232,17 @@ def _profile(bsum, qsum, psum, wsum, fsum, m, k0):
 
 
 def grid_chi2(theta, p: Prepared):
-    """Profiled χ² (up to a constant) of the isotropic model on the grid subsample."""
+    """Profiled χ² (up to a constant) of the isotropic model on the grid subsample.
+
+    The sums in one variadic reduction over the subsample, the exponential formed inside it
+    (vectorised, see :func:`stats`). A reduction per grid point: one for all eight points was as
+    fast at 256 samples and 0.4 ms slower per 1,024 problems of 9.
+    """
     inv = jnp.exp(-2.0 * theta)
-    e = jax.lax.optimization_barrier(jnp.exp(-p.grid_x * inv))  # see stats()
-    bsum = inv * (p.grid_gw @ e)
-    psum = inv * (p.grid_gwf @ e)
-    qsum = inv * inv * (p.grid_g2w @ (e * e))
+    e = jnp.exp(p.grid_x * -inv)
+    c_ = p.grid_gw.shape[0]
+    sums = sum_samples([*(p.grid_gw[c] * e for c in range(c_)), p.grid_gwf * e, p.grid_g2w * (e * e)])
+    bsum, psum, qsum = inv * jnp.stack(sums[:c_]), inv * sums[c_], inv * inv * sums[c_ + 1]
     return _profile(bsum, qsum, psum, p.grid_wsum, p.grid_fsum, p.mult, 0.0)[1]
 
 
@@ -245,10 +250,10 @@ def lobe_exp(theta, p: Prepared, iso: bool):
     """``(e, q)`` at ``θ``: ``e = exp(−t/α²)`` (N,) (or ``exp(−u/αx² − v/αy²)``), ``q = 1/(αx αy)``; ``b = g e q``."""
     if iso:
         inv = jnp.exp(-2.0 * theta[0])
-        return jnp.exp(-p.x[0] * inv), inv
+        return jnp.exp(p.x[0] * -inv), inv
     ix = jnp.exp(-2.0 * theta[0])
     iy = jnp.exp(-2.0 * theta[1])
-    return jnp.exp(-(p.x[0] * ix + p.x[1] * iy)), jnp.exp(-theta[0] - theta[1])
+    return jnp.exp(p.x[0] * -ix + p.x[1] * -iy), jnp.exp(-theta[0] - theta[1])
 
 
 def stats(theta, p: Prepared, iso: bool, with_jac: bool = True) -> Stats:
@@ -266,43 +271,49 @@ def stats(theta, p: Prepared, iso: bool, with_jac: bool = True) -> Stats:
     inv = ix = jnp.exp(-2.0 * theta[0])
     iy = inv if iso else jnp.exp(-2.0 * theta[1])
     e, q = lobe_exp(theta, p, iso)
-    # The barrier makes XLA compute e once, in its own vectorised loop,
-    # instead of re-deriving it inside every sum that reads it; the sums are
-    # dot products, which XLA:CPU vectorises (a fused multiply-reduce runs as
-    # one serial chain of adds). Measured per evaluation of 1,024 scanlines:
-    # 2.6 → 1.1 ms in float32, 3.9 → 2.7 ms in float64.
-    e = jax.lax.optimization_barrier(e)
-    e2 = e * e
-    bsum = q * (p.gw @ e)  # (C,)
-    psum = q * (p.gwf @ e)
-    qsum = q * q * (p.g2w @ e2)
-    c_ = bsum.shape[0]
+    xs = [p.x[i] for i in range(k)]
+    pairs = [(i, j) for i in range(k) for j in range(i, k)]
+    # Every sum in one variadic reduction over the samples, the exponential formed inside it: with the
+    # kernels' reassociating compiler options XLA:CPU vectorises the loop, which reads each stream once.
+    # As dot products (a YNNPACK call per sum, each re-reading e and its stream) the search of 1,024
+    # scanlines of 256 samples cost 10.6 ms, against 6.6 ms so (one core, median of paired runs).
+    gwe = [p.gw[c] * e for c in range(p.gw.shape[0])]  # per weight column (see curvature_pass)
+    gfe, gqe = p.gwf * e, p.g2w * (e * e)
+    terms = [*gwe, gfe, gqe]
+    if with_jac:
+        for x in xs:
+            terms += [*(a * x for a in gwe), gfe * x, gqe * x]
+        terms += [gqe * xs[i] * xs[j] for i, j in pairs]
+    sums = sum_samples(terms)
+    c_ = p.gw.shape[0]
+    bsum = q * jnp.stack(sums[:c_])  # (C,)
+    psum = q * sums[c_]
+    qsum = q * q * sums[c_ + 1]
     s, chi2, sbf, sbb, ok = _profile(bsum, qsum, psum, p.wsum, jnp.zeros_like(bsum), p.mult, p.k0)
     bbar = bsum / p.wsum
     if not with_jac:
         z = jnp.zeros((k,), chi2.dtype)
         zz = jnp.zeros((k, k), chi2.dtype)
         return Stats(chi2, s, sbf, sbb, zz, z, z, zz, bbar, jnp.zeros((c_, k), chi2.dtype))
-    bs = lambda y: p.gw @ (e * y)
-    ps = lambda y: p.gwf @ (e * y)
-    qs = lambda y: p.g2w @ (e2 * y)
+    # Σ gw e x, Σ gwf e x, Σ g2w e² x per geometry stream x, and Σ g2w e² x_i x_j.
+    per = [sums[(c_ + 2) * (1 + i) : (c_ + 2) * (2 + i)] for i in range(k)]
+    bs = [jnp.stack(a[:c_]) for a in per]
+    ps = [a[c_] for a in per]
+    qs = [a[c_ + 1] for a in per]
+    qq = dict(zip(pairs, sums[(c_ + 2) * (1 + k) :]))
     b0, p0, q0 = bsum / q, psum / q, qsum / (q * q)
     if iso:
-        t = p.x[0]  # read again (XLA shares the slice): each branch binds the geometry it uses
-        qt = qs(t)
-        bp = q * (2 * inv * bs(t) - 2 * b0)[:, None]  # (C, 1)
-        pp = q * (2 * inv * ps(t) - 2 * p0)[None]  # (1,)
-        qp = q * q * (2 * inv * qt - 2 * q0)[None]
-        rp = (q * q * (4 * inv * inv * qs(t * t) - 8 * inv * qt + 4 * q0))[None, None]
+        bp = q * (2 * inv * bs[0] - 2 * b0)[:, None]  # (C, 1)
+        pp = q * (2 * inv * ps[0] - 2 * p0)[None]  # (1,)
+        qp = q * q * (2 * inv * qs[0] - 2 * q0)[None]
+        rp = (q * q * (4 * inv * inv * qq[0, 0] - 8 * inv * qs[0] + 4 * q0))[None, None]
     else:
-        u, v = p.x[0], p.x[1]
-        qu, qv = qs(u), qs(v)
-        bp = q * jnp.stack([2 * ix * bs(u) - b0, 2 * iy * bs(v) - b0], -1)  # (C, 2)
-        pp = q * jnp.stack([2 * ix * ps(u) - p0, 2 * iy * ps(v) - p0])
-        qp = q * q * jnp.stack([2 * ix * qu - q0, 2 * iy * qv - q0])
-        rxx = 4 * ix * ix * qs(u * u) - 4 * ix * qu + q0
-        ryy = 4 * iy * iy * qs(v * v) - 4 * iy * qv + q0
-        rxy = 4 * ix * iy * qs(u * v) - 2 * ix * qu - 2 * iy * qv + q0
+        bp = q * jnp.stack([2 * ix * bs[0] - b0, 2 * iy * bs[1] - b0], -1)  # (C, 2)
+        pp = q * jnp.stack([2 * ix * ps[0] - p0, 2 * iy * ps[1] - p0])
+        qp = q * q * jnp.stack([2 * ix * qs[0] - q0, 2 * iy * qs[1] - q0])
+        rxx = 4 * ix * ix * qq[0, 0] - 4 * ix * qs[0] + q0
+        ryy = 4 * iy * iy * qq[1, 1] - 4 * iy * qs[1] + q0
+        rxy = 4 * ix * iy * qq[0, 1] - 2 * ix * qs[0] - 2 * iy * qs[1] + q0
         rp = q * q * jnp.stack([jnp.stack([rxx, rxy]), jnp.stack([rxy, ryy])])  # (2, 2)
     m, wsum = p.mult, p.wsum
     spb = qp - m * jnp.sum(bsum[:, None] * bp / wsum[:, None], axis=0)
@@ -355,7 +366,6 @@ def grid_start(p: Prepared) -> Array:
     offsets = (jnp.arange(GRID_POINTS, dtype=centre.dtype) - (GRID_POINTS - 1) / 2) * GRID_STEP
     lo, hi = math.log(ALPHA_MIN), math.log(ALPHA_MAX)
     thetas = jnp.clip(centre + offsets, lo, hi)
-    # Unrolled: XLA fuses eight straight-line passes better than a vmapped one.
     chi = jnp.stack([grid_chi2(thetas[i], p) for i in range(GRID_POINTS)])
     chi = jnp.where(jnp.isfinite(chi), chi, jnp.finfo(chi.dtype).max)
     i = jnp.clip(jnp.argmin(chi), 1, GRID_POINTS - 2)
@@ -505,11 +515,12 @@ def curvature_pass(theta, chi2, s_hat, p: Prepared, cov, scale):
     # one loop that reads the streams once, where a mat-vec per sum re-read them (XLA's cost analysis:
     # 18 MB of memory traffic for the check of 1,024 scanlines of 256 samples, not 50 MB). The
     # exponentials are formed inside it: with the sums reassociated (the kernels' compiler options) the
-    # loop is vectorised, and materialising them first cost 0.1–0.2 ms more per 1,024 scanlines.
-    both = [e_t for _, _, e_t in ends]
+    # loop is vectorised, and materialising them first cost 0.1–0.2 ms more per 1,024 scanlines. Each
+    # weight column's products are written apart: broadcast over the columns, an exponential would be
+    # read once per column, and XLA materialises it rather than form it again for each.
     terms = []
-    for e_t in both:
-        terms += [*(p.gw * e_t[None, :]), p.gwf * e_t, p.g2w * e_t * e_t]
+    for _, _, e_t in ends:
+        terms += [*(p.gw[c] * e_t for c in range(p.gw.shape[0])), p.gwf * e_t, p.g2w * e_t * e_t]
     return terms, lambda sums: _verdict(sums, theta, chi2, s_hat, p, scale, ends, sd_t, sd_s, sign_r, corner)
 
 
