@@ -148,11 +148,13 @@ def clean(f, wi, wo, mask, weights, dtype):
 SMALL_SAMPLES = 32
 _SMALL_OPTIONS = {"xla_cpu_experimental_ynn_fusion_type": ""}
 
-# The sums XLA:CPU forms itself (the reductions YNNPACK does not take: the curvature check's and the
-# sandwich's) are one serial chain of adds in IEEE order, one value at a time. Allowed to reassociate
-# them (LLVM's fast-math flags with NaNs, infinities, division and library functions still exact), it
-# vectorises them: sums that differ in the last bits, and per 1,024 scanlines of 256 samples (one core)
-# the sandwich's reduction 1.6 → 1.1 ms, the check's 0.38 → 0.25 ms. Other backends ignore the options.
+# The kernels' sums over the samples are variadic reductions XLA:CPU forms itself (the search's, the
+# curvature check's, the sandwich's): in IEEE order each is one serial chain of adds, one value at a time.
+# Allowed to reassociate them (LLVM's fast-math flags with NaNs, infinities, division and library
+# functions still exact), it vectorises them: sums that differ in the last bits, and per 1,024 scanlines
+# of 256 samples (one core) the sandwich's reduction 1.6 → 1.1 ms, the check's 0.38 → 0.25 ms; the
+# search's sums, which were dot products, cost more than so (see ``_varpro.stats``). Other backends
+# ignore the options.
 _REASSOCIATE_OPTIONS = {
     "xla_cpu_enable_fast_math": True,
     "xla_cpu_fast_math_honor_nans": True,
