@@ -28,6 +28,7 @@ BASE = (
     "wardjax._status",
     "wardjax._shapes",
     "wardjax._data",
+    "wardjax._jit",
 )
 STAGES = (
     "capture",

@@ -132,10 +132,4 @@ def _product(a, b) -> list[list[Any]]:
     return [[_dot(row, col) for col in cols] for row in a]
 
 
-def sum_samples(terms):
-    """``[Σ_n x[n] for x in terms]`` of equally shaped ``(N,)`` arrays as one variadic reduction."""
-    zeros = tuple(jnp.zeros((), x.dtype) for x in terms)
-    return jax.lax.reduce(tuple(terms), zeros, lambda a, b: tuple(x + y for x, y in zip(a, b)), (0,))
-
-
-__all__ = ["LEVERAGE_FLOOR", "LEVERAGE_SAMPLES", "sandwich_pass", "sum_samples"]
+__all__ = ["LEVERAGE_FLOOR", "LEVERAGE_SAMPLES", "sandwich_pass"]

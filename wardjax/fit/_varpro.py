@@ -42,7 +42,7 @@ import jax.numpy as jnp
 from jaxtyping import Array, Float, Int
 
 from .._status import Status
-from ._sandwich import sandwich_pass, sum_samples
+from ._sandwich import sandwich_pass
 
 # Search range of α. Below 1e-4 no camera resolves a lobe; above 2 the lobe is
 # flat over the hemisphere and α no longer has a meaning.
@@ -229,6 +229,14 @@ def _profile(bsum, qsum, psum, wsum, fsum, m, k0):
     s = jnp.where(ok, jnp.maximum(sbf, 0.0) / jnp.where(ok, sbb, 1.0), 0.0)
     chi2 = k0 - s * (2.0 * sbf - s * sbb)
     return s, chi2, sbf, sbb, ok
+
+
+def sum_samples(terms):
+    """``[Σ_n x[n] for x in terms]`` of equally shaped ``(N,)`` arrays as one variadic reduction: one loop
+    over the samples, which XLA:CPU vectorises where the program may reassociate its sums (the kernels'
+    compiler options, :data:`~wardjax.fit._data._REASSOCIATE_OPTIONS`)."""
+    zeros = tuple(jnp.zeros((), x.dtype) for x in terms)
+    return jax.lax.reduce(tuple(terms), zeros, lambda a, b: tuple(x + y for x, y in zip(a, b)), (0,))
 
 
 def grid_chi2(theta, p: Prepared):
@@ -496,7 +504,7 @@ def curvature_pass(theta, chi2, s_hat, p: Prepared, cov, scale):
     over one standard error (a lobe spanning few samples, a weakly detected lobe), and
     :func:`wardjax.fit._profile.profile_errors` replaces the standard errors of ρs and α by
     profile-likelihood ones. ``verdict(sums)`` returns ``1`` where the check fails (the sums of
-    ``terms`` over the samples, e.g. by :func:`~wardjax.fit._sandwich.sum_samples`).
+    ``terms`` over the samples, e.g. by :func:`sum_samples`).
     """
     alpha = jnp.exp(theta[0])
     var_s, var_a, cov_sa = cov[3, 3], cov[4, 4], cov[3, 4]
