@@ -64,13 +64,14 @@ __all__ = ["ScanlineFit", "fit_scanlines"]
 
 Model = Literal["isotropic", "anisotropic"]
 
-# Rows per compiled chunk: about 3–6 MB per input array. One huge batch is
-# slower; measured here, 1,024 rows beat 4,096 in float32 too (14.3k vs 9.7k
-# fits per CPU-second).
+# Rows per compiled chunk on a CPU where the sample count is not known (the float64 refits).
 _CHUNK = {np.dtype(np.float64): 1024, np.dtype(np.float32): 1024}
-# Few samples per row: more rows per chunk, at most ~64 k samples (4,096 rows of up to 16 samples); each
-# call costs the host a fixed ~0.4 ms (dispatch, fetch) that 1,024 rows of 9 samples hardly outweigh.
-_SMALL_CHUNK_SAMPLES = 64
+# Samples per chunk on a CPU: the search's streams of a chunk then stay in the cores' caches through its
+# steps. Two cores, 8,192 scanlines of 256 samples, fits/s with the defaults (Gauss–Newton): 256 rows
+# 73k (84k), 1,024 rows 56k (65k); weighted 54k (55k) against 52k (45k); float32 131k (139k) against
+# 80k (104k). Few samples per row take more rows, at most 4,096: each call costs the host a fixed
+# ~0.4 ms (dispatch, fetch) that 1,024 rows of 9 samples hardly outweigh; at least 64.
+_CHUNK_SAMPLES = 65_536
 _ACCELERATOR_CHUNK = 131_072  # per device, on a GPU with ≥ 32 GB (see _default_chunk)
 # Small problems (a pixel seen in a few photographs): compiled for their exact sample count.
 TINY = 16
@@ -277,8 +278,9 @@ def fit_scanlines(
         float32 fit is not certified (any status but ``converged``) are
         fitted again in float64, so float32 loses no accuracy.
     chunk_size
-        Scanlines per compiled call and device; default 1024 on CPU (4,096 for up to 16 samples,
-        2,048 up to 32), 131,072 on an accelerator with ≥ 32 GB of memory (32,768 on a smaller one).
+        Scanlines per compiled call and device; default on a CPU about 65,536 samples' worth (256
+        scanlines of 256 samples; 4,096 of up to 16 samples), 131,072 on an accelerator with ≥ 32 GB
+        of memory (32,768 on a smaller one).
     devices
         JAX devices to spread each call's scanlines over (``NamedSharding``
         over a 1-D mesh, scanline axis); default ``jax.devices()``. Scanlines
@@ -380,8 +382,9 @@ def _check_devices(devices) -> list:
 
 
 def _default_chunk(dtype, devices, n_pad: int | None = None) -> int:
-    """Rows per call and device: 1024 on CPU (cache-sized), up to 4× more for rows of ``n_pad`` ≤ 32
-    (padded) samples (4,096 rows up to 16 samples, 2,048 at 32); on an accelerator 131,072 where it has
+    """Rows per call and device: on a CPU :data:`_CHUNK_SAMPLES` samples' worth of rows of ``n_pad``
+    (padded) samples, between 64 and 4,096 (256 rows of 256 samples, 4,096 rows up to 16 samples;
+    1,024 where ``n_pad`` is not given); on an accelerator 131,072 where it has
     ≥ 32 GB (one call then holds ~5 GB in float64), else 32,768. Measured on an H200 with 10⁶ scanlines on
     the device: 131,072 rows gave 2.58 M fits/s in float64 against 1.96 M at 32,768 (3.75 vs 2.92 M in
     float32). On two CPU cores, 10⁵ problems of 9 samples (``errors="auto"``): 1,024 rows 2.49 µs
@@ -390,8 +393,9 @@ def _default_chunk(dtype, devices, n_pad: int | None = None) -> int:
     """
     device = devices[0]
     if device.platform == "cpu":
-        rows = _CHUNK[np.dtype(dtype)]
-        return rows * min(4, max(1, _SMALL_CHUNK_SAMPLES // n_pad)) if n_pad else rows
+        if not n_pad:
+            return _CHUNK[np.dtype(dtype)]
+        return min(4096, max(64, _CHUNK_SAMPLES // n_pad))
     limit = (device.memory_stats() or {}).get("bytes_limit", 0)
     return _ACCELERATOR_CHUNK if limit >= 32 << 30 else _ACCELERATOR_CHUNK // 4
 
