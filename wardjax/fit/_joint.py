@@ -23,7 +23,7 @@ from .. import _shapes
 from .._status import Status
 from ..ward import NORMALIZATIONS, WardParams, ward_geometry
 from . import _varpro
-from ._data import SAMPLE_FILL, bucket_rows, clean_jit, moments_chunk, pad_rows, pad_samples
+from ._data import SAMPLE_FILL, bucket_rows, clean_jit, kernel, moments_chunk, pad_rows, pad_samples
 
 __all__ = ["CombinedFit", "combined"]
 
@@ -261,7 +261,7 @@ def combined(
 _JOINT_GRID = np.linspace(math.log(2e-3), math.log(1.0), 24)
 
 
-@jax.jit
+@kernel()  # the scanline kernels' compiler options: its sums are theirs (_varpro.stats)
 def _joint_grid_start(prepared):
     """``(log α, ρs)`` minimising the joint profiled χ² on a log-α grid, refined by a parabola."""
     thetas = jnp.asarray(_JOINT_GRID)
