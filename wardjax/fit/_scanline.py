@@ -64,7 +64,7 @@ __all__ = ["ScanlineFit", "fit_scanlines"]
 
 Model = Literal["isotropic", "anisotropic"]
 
-# Rows per compiled chunk on a CPU where the sample count is not known (the float64 refits).
+# Rows per compiled chunk on a CPU where the sample count is not given (the float64 refits, the profiles' pass).
 _CHUNK = {np.dtype(np.float64): 1024, np.dtype(np.float32): 1024}
 # Samples per chunk on a CPU: the search's streams of a chunk then stay in the cores' caches through its
 # steps. Two cores, 8,192 scanlines of 256 samples, fits/s with the defaults (Gauss–Newton): 256 rows
